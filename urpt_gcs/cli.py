@@ -1,0 +1,126 @@
+"""The ``urpt-gcs`` command line: a thin layer over the library.
+
+Only :class:`urpt_gcs.errors.UrptError` is caught: its message goes to stderr on one line and
+the exit status is 1. Usage errors (unknown flags, a word where a number belongs) exit 2.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from urpt_gcs import __version__
+from urpt_gcs.errors import SettingsError, UrptError
+from urpt_gcs.mission import FIRMWARES, MissionSettings
+from urpt_gcs.planner import PlanSettings
+from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
+
+
+def _fail(exc: UrptError) -> None:
+    message = " ".join(str(exc).split())
+    click.echo(f"urpt-gcs: error: {message}", err=True)
+    sys.exit(1)
+
+
+def _parse_home(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        lat, lon = (float(p) for p in parts)
+    except ValueError:
+        raise SettingsError(
+            f"--home {text!r} is not LAT,LON: give it as e.g. --home 47.3977,8.5456"
+        ) from None
+    return lat, lon
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="urpt-gcs")
+def main() -> None:
+    """Plan, check and upload drone missions that photograph every target on real terrain."""
+
+
+@main.command("plan")
+@click.option("--dem", "dem", required=True, help="DSM/DEM GeoTIFF of the site (e.g. from Pix4D).")
+@click.option("--targets", "targets", required=True,
+              help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon).")
+@click.option("--out", "out", default="out", show_default=True, help="Folder for the outputs.")
+@click.option("--fov", "fov", type=float, default=30.0, show_default=True,
+              help="Camera half-angle from nadir, degrees.")
+@click.option("--samples", type=int, default=36, show_default=True,
+              help="Azimuths sampled per visibility region.")
+@click.option("--altitude", type=float, default=None,
+              help="Flight-plane altitude in the DEM's vertical datum, metres.")
+@click.option("--clearance", type=float, default=30.0, show_default=True,
+              help="Without --altitude: metres above the highest terrain in the area.")
+@click.option("--min-clearance", type=float, default=10.0, show_default=True,
+              help="Refuse a plan whose legs pass closer than this to the terrain, metres.")
+@click.option("--home", "home", default=None, help="Take-off point LAT,LON (overrides a Home placemark).")
+@click.option("--hold", type=float, default=2.0, show_default=True, help="Hold at each viewpoint, s.")
+@click.option("--speed", type=float, default=5.0, show_default=True, help="Cruise speed, m/s.")
+@click.option("--firmware", type=str, default="ardupilot", show_default=True,
+              help=f"Autopilot: {' or '.join(FIRMWARES)}.")
+@click.option("--solver", type=str, default="auto", show_default=True,
+              help=f"One of {', '.join(SOLVER_CHOICES)}.")
+@click.option("--time-limit", type=float, default=5.0, show_default=True,
+              help="Seconds the solver may search.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("--quiet", is_flag=True, help="Print nothing but errors.")
+def plan_command(dem: str, targets: str, out: str, fov: float, samples: int,
+                 altitude: float | None, clearance: float, min_clearance: float,
+                 home: str | None, hold: float, speed: float, firmware: str, solver: str,
+                 time_limit: float, seed: int, as_json: bool, quiet: bool) -> None:
+    """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
+    from urpt_gcs.planner import plan
+    from urpt_gcs.products import write_products
+    from urpt_gcs.report import summary_text
+
+    try:
+        settings = PlanSettings(
+            fov_deg=fov,
+            samples=samples,
+            altitude_m=altitude,
+            clearance_m=clearance,
+            min_clearance_m=min_clearance,
+            home=_parse_home(home),
+            solver=solver,
+            solve=SolveSettings(time_limit_s=time_limit, seed=seed),
+            mission=MissionSettings(
+                firmware=firmware,  # type: ignore[arg-type]  # validated in __post_init__
+                hold_s=hold,
+                cruise_speed_m_s=speed,
+                hover_speed_m_s=speed,
+            ),
+        )
+        progress = None if (quiet or as_json) else (
+            lambda msg: click.echo(f"... {msg}", err=True))
+        result = plan(Path(dem), Path(targets), settings, progress=progress)
+        data = write_products(result, Path(out))
+    except UrptError as exc:
+        _fail(exc)
+        return
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+    elif not quiet:
+        click.echo(summary_text(data))
+
+
+@main.command("demo-site")
+@click.option("--out", "out", default="missions/demo", show_default=True,
+              help="Folder for site.tif and targets.kml.")
+@click.option("--seed", type=int, default=7, show_default=True)
+def demo_site_command(out: str, seed: int) -> None:
+    """Generate the demo site: a Pix4D-like DSM and a KML of targets."""
+    from urpt_gcs.demo import make_demo_site
+
+    try:
+        site = make_demo_site(Path(out), seed=seed)
+    except UrptError as exc:
+        _fail(exc)
+        return
+    click.echo(f"wrote {site.dsm_path} and {site.targets_path}")

@@ -1,0 +1,175 @@
+"""GTSP instance: candidate viewpoints, what each really sees, and the distances between them.
+
+Candidates are each region's boundary samples, pulled one DEM cell inwards so that they do not
+sit on the grazing ray, plus each target's nadir point. A candidate's cover set is decided by
+a direct line-of-sight test on the DEM inside the camera cone (``visibility.line_of_sight``),
+never by polygon containment. A boundary sample that fails to see its own target is pulled
+further in until it does, or dropped. The nadir point always sees its target.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+
+from urpt_gcs.terrain import FloatArray, Terrain
+from urpt_gcs.visibility import BoolArray, Camera, Region, line_of_sight
+
+IntArray = npt.NDArray[np.int64]
+
+# How far boundary samples are pulled towards their target, in DEM cells, on each try.
+_INSETS_CELLS = (1.0, 2.0, 4.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Geometry:
+    """Where the targets are and how they are seen: what geometric bounds need."""
+
+    targets_xy: FloatArray
+    ground_m: FloatArray
+    altitude_m: float
+    fov_deg: float
+    terrain_max_m: float
+
+    @property
+    def cone_radius_m(self) -> FloatArray:
+        tan = np.tan(np.radians(self.fov_deg))
+        return np.maximum(self.altitude_m - self.ground_m, 0.0) * tan
+
+
+@dataclass(frozen=True, slots=True)
+class Instance:
+    """A GTSP with cover sets.
+
+    ``covers[v, t]`` says viewpoint ``v`` sees target ``t``. ``owner[v]`` is the target whose
+    region ``v`` was sampled from. ``distance_m`` is (n + 1) x (n + 1): index 0 is the depot
+    (home), index ``v + 1`` viewpoint ``v``. Distances are horizontal: the climb at home and
+    the descent are the same for every tour.
+    """
+
+    viewpoints_xy: FloatArray
+    covers: BoolArray
+    owner: IntArray
+    depot_xy: tuple[float, float]
+    distance_m: FloatArray
+    geometry: Geometry | None = None
+
+    def __post_init__(self) -> None:
+        n, m = self.covers.shape
+        if self.viewpoints_xy.shape != (n, 2) or self.owner.shape != (n,):
+            raise ValueError("Instance arrays disagree on the number of viewpoints")
+        if self.distance_m.shape != (n + 1, n + 1):
+            raise ValueError("Instance.distance_m must be (n + 1) x (n + 1)")
+        missing = np.flatnonzero(~self.covers.any(axis=0))
+        if missing.size:
+            raise ValueError(f"targets {missing.tolist()} are seen by no viewpoint")
+
+    @property
+    def n_viewpoints(self) -> int:
+        return int(self.covers.shape[0])
+
+    @property
+    def n_targets(self) -> int:
+        return int(self.covers.shape[1])
+
+    def tour_length(self, order: npt.ArrayLike) -> float:
+        """Length of the closed tour depot -> viewpoints in ``order`` -> depot."""
+        nodes = np.concatenate([[0], np.asarray(order, dtype=np.int64) + 1, [0]])
+        return float(self.distance_m[nodes[:-1], nodes[1:]].sum())
+
+    def uncovered(self, order: npt.ArrayLike) -> list[int]:
+        """Targets that no viewpoint in ``order`` sees."""
+        idx = np.asarray(order, dtype=np.int64)
+        seen = self.covers[idx].any(axis=0) if idx.size else np.zeros(self.n_targets, bool)
+        return np.flatnonzero(~seen).tolist()
+
+
+def euclidean_matrix(points_xy: FloatArray) -> FloatArray:
+    """Pairwise Euclidean distances."""
+    diff = points_xy[:, None, :] - points_xy[None, :, :]
+    return np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+
+
+def cover_sets(
+    terrain: Terrain,
+    viewpoints_xy: FloatArray,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+) -> BoolArray:
+    """Which targets each viewpoint sees: inside the camera cone and in line of sight."""
+    n, m = len(viewpoints_xy), len(targets_xy)
+    covers = np.zeros((n, m), dtype=bool)
+    if n == 0 or m == 0:
+        return covers
+    cone = camera.cone_radius_m(ground_m)
+    tree = shapely.STRtree(shapely.points(targets_xy))
+    vp_idx, tg_idx = tree.query(
+        shapely.points(viewpoints_xy), predicate="dwithin", distance=float(cone.max())
+    )
+    horizontal = np.hypot(
+        viewpoints_xy[vp_idx, 0] - targets_xy[tg_idx, 0],
+        viewpoints_xy[vp_idx, 1] - targets_xy[tg_idx, 1],
+    )
+    in_cone = horizontal <= cone[tg_idx]
+    vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
+    eye = np.column_stack(
+        [viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)]
+    )
+    tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
+    seen = line_of_sight(terrain, eye, tgt)
+    covers[vp_idx[seen], tg_idx[seen]] = True
+    return covers
+
+
+def build_instance(
+    terrain: Terrain,
+    regions: tuple[Region, ...],
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    depot_xy: tuple[float, float],
+    terrain_max_m: float,
+) -> Instance:
+    """Candidate viewpoints with verified cover sets, and the distance matrix."""
+    nadir = np.asarray(targets_xy, dtype=np.float64)
+    own = np.concatenate([np.full(len(r.reach_m), r.target, dtype=np.int64) for r in regions])
+    az = np.concatenate([r.azimuth_rad for r in regions])
+    reach = np.concatenate([r.reach_m for r in regions])
+    points, owners = [nadir], [np.arange(len(nadir), dtype=np.int64)]
+    pending = np.ones(len(own), dtype=bool)
+    for inset_cells in _INSETS_CELLS:
+        idx = np.flatnonzero(pending)
+        r = reach[idx] - inset_cells * terrain.cell_m
+        # A sample pulled onto the nadir point adds nothing: the nadir is already there.
+        pending[idx[r <= 1e-6]] = False
+        idx, r = idx[r > 1e-6], r[r > 1e-6]
+        xy = nadir[own[idx]] + r[:, None] * np.column_stack([np.cos(az[idx]), np.sin(az[idx])])
+        eye = np.column_stack([xy, np.full(len(xy), camera.altitude_m)])
+        tgt = np.column_stack([nadir[own[idx]], ground_m[own[idx]]])
+        ok = line_of_sight(terrain, eye, tgt)
+        points.append(xy[ok])
+        owners.append(own[idx[ok]])
+        pending[idx[ok]] = False
+    viewpoints = np.concatenate(points)
+    owner = np.concatenate(owners)
+    covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera)
+    all_xy = np.vstack([np.asarray(depot_xy, dtype=np.float64)[None, :], viewpoints])
+    return Instance(
+        viewpoints_xy=viewpoints,
+        covers=covers,
+        owner=owner,
+        depot_xy=(float(depot_xy[0]), float(depot_xy[1])),
+        distance_m=euclidean_matrix(all_xy),
+        geometry=Geometry(
+            targets_xy=nadir,
+            ground_m=np.asarray(ground_m, dtype=np.float64),
+            altitude_m=camera.altitude_m,
+            fov_deg=camera.fov_deg,
+            terrain_max_m=terrain_max_m,
+        ),
+    )
+

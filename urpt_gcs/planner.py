@@ -1,0 +1,351 @@
+"""plan(): from a DEM and a target file to a checked tour and its mission.
+
+Each stage is a function of the previous stage's value (see the package modules); this module
+only chains them, decides the flight plane and the window of the DEM to read, and checks the
+result against the terrain before anyone flies it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyproj
+
+from urpt_gcs.errors import DemError, PlanError, SettingsError, TargetsError
+from urpt_gcs.gtsp import Instance, build_instance
+from urpt_gcs.mission import GeoPoint, Mission, MissionSettings, build_mission
+from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, solve
+from urpt_gcs.targets import Target, TargetSet, read_targets
+from urpt_gcs.terrain import (
+    WGS84,
+    DemInfo,
+    FloatArray,
+    Terrain,
+    has_any_data,
+    open_dem,
+    planning_crs,
+    read_terrain,
+)
+from urpt_gcs.visibility import Camera, Region, visibility_regions
+
+# Extra DEM read around the operating area, in cells, so bilinear samples at its edge exist.
+_WINDOW_MARGIN_CELLS = 4
+
+
+@dataclass(frozen=True, slots=True)
+class PlanSettings:
+    """Every choice a plan depends on. Defaults are what ``urpt-gcs plan`` uses."""
+
+    fov_deg: float = 30.0
+    samples: int = 36
+    altitude_m: float | None = None
+    clearance_m: float = 30.0
+    min_clearance_m: float = 10.0
+    home: tuple[float, float] | None = None
+    solver: str = "auto"
+    solve: SolveSettings = field(default_factory=SolveSettings)
+    mission: MissionSettings = field(default_factory=MissionSettings)
+    climb_m_s: float = 2.5
+    descent_m_s: float = 1.5
+    accel_m_s2: float = 2.5
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
+            raise SettingsError(
+                f"--fov {self.fov_deg} is outside (0, 90): give the camera half-angle in degrees"
+            )
+        if self.samples < 3:
+            raise SettingsError(f"--samples {self.samples} is below 3: use at least 3 azimuths")
+        if self.samples > 3600:
+            raise SettingsError(f"--samples {self.samples} is above 3600: use fewer azimuths")
+        if self.altitude_m is not None and not math.isfinite(self.altitude_m):
+            raise SettingsError(f"--altitude {self.altitude_m} is not a number of metres")
+        if not (math.isfinite(self.clearance_m) and self.clearance_m > 0.0):
+            raise SettingsError(
+                f"--clearance {self.clearance_m} must be a positive number of metres"
+            )
+        if not (math.isfinite(self.min_clearance_m) and self.min_clearance_m >= 0.0):
+            raise SettingsError(
+                f"--min-clearance {self.min_clearance_m} must be zero or more metres"
+            )
+        if self.solver not in SOLVER_CHOICES:
+            raise SettingsError(
+                f"--solver {self.solver!r} is not known: use one of {', '.join(SOLVER_CHOICES)}"
+            )
+        if self.home is not None:
+            lat, lon = self.home
+            if not (math.isfinite(lat) and -90 <= lat <= 90 and math.isfinite(lon)
+                    and -180 <= lon <= 180):
+                raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees")
+
+
+@dataclass(frozen=True, slots=True)
+class Leg:
+    """One straight leg of the flight at the plane's altitude, with its terrain clearance."""
+
+    start: str
+    end: str
+    length_m: float
+    min_clearance_m: float
+    unknown_m: float
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """Everything a plan produced, stage by stage."""
+
+    settings: PlanSettings
+    dem: DemInfo
+    terrain: Terrain
+    targets: TargetSet
+    crs: pyproj.CRS
+    targets_xy: FloatArray
+    ground_m: FloatArray
+    home_xy: tuple[float, float]
+    home_ground_m: float
+    home_source: str
+    camera: Camera
+    terrain_max_m: float
+    regions: tuple[Region, ...]
+    instance: Instance
+    tour: Tour
+    legs: tuple[Leg, ...]
+    mission: Mission
+    flight_time_s: float
+    timings_s: dict[str, float]
+    warnings: tuple[str, ...]
+
+    @property
+    def altitude_rel_m(self) -> float:
+        return self.camera.altitude_m - self.home_ground_m
+
+
+Progress = Callable[[str], None]
+
+
+def _pick_home(targets: TargetSet, settings: PlanSettings) -> tuple[float, float, str]:
+    if settings.home is not None:
+        return settings.home[0], settings.home[1], "--home"
+    if targets.home is not None:
+        return targets.home.lat_deg, targets.home.lon_deg, f"placemark '{targets.home.name}'"
+    lat = float(np.mean([t.lat_deg for t in targets.targets]))
+    lon = float(np.mean([t.lon_deg for t in targets.targets]))
+    return lat, lon, "centroid of the targets (no Home placemark and no --home given)"
+
+
+def _bbox(xy: FloatArray, pad: float) -> tuple[float, float, float, float]:
+    lo = xy.min(axis=0) - pad
+    hi = xy.max(axis=0) + pad
+    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+
+def _contains(outer: tuple[float, float, float, float],
+              inner: tuple[float, float, float, float]) -> bool:
+    return (outer[0] <= inner[0] and outer[1] <= inner[1] and outer[2] >= inner[2]
+            and outer[3] >= inner[3])
+
+
+def _check_ground(info: DemInfo, terrain: Terrain, names: list[str], lat_lon: list[tuple[float,
+                  float]], xy: FloatArray) -> FloatArray:
+    """Ground elevation at each point, or an error naming the first point without one."""
+    ground = terrain.sample(xy[:, 0], xy[:, 1])
+    bad = np.flatnonzero(~np.isfinite(ground))
+    if bad.size == 0:
+        return ground
+    if not has_any_data(info):
+        raise DemError(
+            f"DEM '{info.path}' holds no elevation at all (every cell is nodata): "
+            "export the DSM again"
+        )
+    i = int(bad[0])
+    lat, lon = lat_lon[i]
+    to_src = pyproj.Transformer.from_crs(WGS84, info.horizontal_crs, always_xy=True)
+    sx, sy = to_src.transform(lon, lat)
+    col, row = ~info.transform @ (sx, sy)
+    where = f"{names[i]} ({lat:.7f}, {lon:.7f})"
+    if not (0 <= col <= info.width_px and 0 <= row <= info.height_px):
+        raise TargetsError(
+            f"{where} lies outside DEM '{info.path}': remove it from the target file or use a "
+            "DEM that covers it"
+        )
+    raise TargetsError(
+        f"{where} is on a nodata cell of DEM '{info.path}': move it onto surveyed ground"
+    )
+
+
+def _legs(terrain: Terrain, stops_xy: FloatArray, names: list[str], altitude_m: float
+          ) -> tuple[Leg, ...]:
+    """Sample every leg of the closed path through ``stops_xy`` against the terrain."""
+    legs = []
+    step = terrain.cell_m / 2.0
+    for i in range(len(stops_xy) - 1):
+        a, b = stops_xy[i], stops_xy[i + 1]
+        length = float(np.hypot(*(b - a)))
+        n = max(int(math.ceil(length / step)), 1)
+        t = np.linspace(0.0, 1.0, n + 1)
+        z = terrain.sample(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
+        known = np.isfinite(z)
+        clearance = float(altitude_m - np.max(z[known])) if known.any() else math.nan
+        legs.append(Leg(names[i], names[i + 1], length, clearance,
+                        float((~known).sum() / max(n + 1, 1) * length)))
+    return tuple(legs)
+
+
+def plan(
+    dem_path: Path,
+    targets_path: Path,
+    settings: PlanSettings | None = None,
+    progress: Progress | None = None,
+) -> Plan:
+    """Plan a mission that photographs every target from the flight plane.
+
+    Parameters
+    ----------
+    dem_path
+        GeoTIFF DSM/DEM of the site.
+    targets_path
+        KML/KMZ, GeoJSON or CSV of the targets (a point named Home or Launch is the take-off).
+    settings
+        Camera, flight plane, solver and mission choices; defaults if omitted.
+    progress
+        Called with a short message as each stage starts.
+
+    Returns
+    -------
+    Plan
+        The checked tour, its mission and everything computed on the way.
+    """
+    settings = settings or PlanSettings()
+    say = progress or (lambda _msg: None)
+    timings: dict[str, float] = {}
+    warnings: list[str] = []
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = now - clock
+        clock = now
+
+    say("reading targets")
+    targets = read_targets(targets_path)
+    info = open_dem(dem_path)
+    home_lat, home_lon, home_source = _pick_home(targets, settings)
+    names = [t.name for t in targets.targets]
+    lat_lon = [(t.lat_deg, t.lon_deg) for t in targets.targets]
+    center = (float(np.mean([p[1] for p in lat_lon])), float(np.mean([p[0] for p in lat_lon])))
+    crs = planning_crs(info, center)
+    to_xy = pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
+    tx, ty = to_xy.transform([p[1] for p in lat_lon], [p[0] for p in lat_lon])
+    targets_xy = np.column_stack([np.atleast_1d(tx), np.atleast_1d(ty)]).astype(np.float64)
+    hx, hy = to_xy.transform(home_lon, home_lat)
+    home_xy = (float(hx), float(hy))
+    points_xy = np.vstack([targets_xy, np.array([home_xy])])
+    lap("targets")
+
+    say("reading terrain")
+    tan = math.tan(math.radians(settings.fov_deg))
+    area = _bbox(points_xy, 0.0)
+    terrain = read_terrain(info, crs, _bbox(points_xy, 0.0))
+    margin = _WINDOW_MARGIN_CELLS * terrain.cell_m
+    all_ground = _check_ground(info, terrain, [*names, f"home ({home_source})"],
+                               [*lat_lon, (home_lat, home_lon)], points_xy)
+    ground, home_ground = all_ground[:-1], float(all_ground[-1])
+    for _ in range(12):
+        top = float(np.nanmax(terrain.elevation_m))
+        altitude = settings.altitude_m if settings.altitude_m is not None else (
+            top + settings.clearance_m)
+        reach = max(altitude - float(ground.min()), 0.0) * tan
+        need = _bbox(points_xy, reach + margin)
+        if _contains(area, need):
+            break
+        area = need
+        terrain = read_terrain(info, crs, area)
+    lap("terrain")
+
+    low = np.flatnonzero(ground >= altitude)
+    if low.size:
+        i = int(low[0])
+        raise SettingsError(
+            f"--altitude {altitude:g} m is at or below the terrain at target '{names[i]}' "
+            f"({ground[i]:.1f} m): raise it above {float(ground.max()):.1f} m or use --clearance"
+        )
+    if home_ground >= altitude:
+        raise SettingsError(
+            f"--altitude {altitude:g} m is at or below the ground at home ({home_ground:.1f} m): "
+            "raise it or use --clearance"
+        )
+    camera = Camera(altitude_m=altitude, fov_deg=settings.fov_deg)
+
+    say(f"visibility of {len(names)} targets")
+    regions = visibility_regions(terrain, targets_xy, ground, camera, settings.samples)
+    lap("visibility")
+    say("checking viewpoints")
+    instance = build_instance(terrain, regions, targets_xy, ground, camera, home_xy, top)
+    lap("viewpoints")
+    say(f"solving ({instance.n_viewpoints} viewpoints)")
+    tour = solve(instance, settings.solver, settings.solve)
+    lap("solve")
+
+    stops = np.vstack([[home_xy], instance.viewpoints_xy[list(tour.order)], [home_xy]])
+    stop_names = ["home", *(_viewpoint_name(instance, v, names) for v in tour.order), "home"]
+    legs = _legs(terrain, stops, stop_names, altitude)
+    for number, leg in enumerate(legs, start=1):
+        if math.isfinite(leg.min_clearance_m) and leg.min_clearance_m < settings.min_clearance_m:
+            raise PlanError(
+                f"leg {number} ({leg.start} -> {leg.end}) passes {leg.min_clearance_m:.1f} m "
+                f"above the terrain, under --min-clearance {settings.min_clearance_m:g} m: "
+                "raise --altitude or --clearance"
+            )
+        if leg.unknown_m > 0.0:
+            warnings.append(
+                f"leg {number} ({leg.start} -> {leg.end}) crosses {leg.unknown_m:.0f} m without "
+                "elevation data: its clearance there is not verified"
+            )
+    lap("checks")
+
+    home = GeoPoint(home_lat, home_lon, home_ground)
+    mission = build_mission(
+        home, _latlon(crs, instance.viewpoints_xy[list(tour.order)]),
+        altitude - home_ground, settings.mission,
+    )
+    flight_time = _flight_time(settings, tour, altitude - home_ground)
+    lap("mission")
+    return Plan(
+        settings=settings, dem=info, terrain=terrain, targets=targets, crs=crs,
+        targets_xy=targets_xy, ground_m=ground, home_xy=home_xy, home_ground_m=home_ground,
+        home_source=home_source, camera=camera, terrain_max_m=top, regions=regions,
+        instance=instance, tour=tour, legs=legs, mission=mission, flight_time_s=flight_time,
+        timings_s=timings, warnings=tuple(warnings),
+    )
+
+
+def _viewpoint_name(instance: Instance, v: int, names: list[str]) -> str:
+    seen = np.flatnonzero(instance.covers[v]).tolist()
+    return "viewpoint for " + "+".join(names[t] for t in seen)
+
+
+def _latlon(crs: pyproj.CRS, xy: FloatArray) -> list[tuple[float, float]]:
+    to_geo = pyproj.Transformer.from_crs(crs, WGS84, always_xy=True)
+    lon, lat = to_geo.transform(xy[:, 0], xy[:, 1])
+    return list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist(), strict=True))
+
+
+def _flight_time(settings: PlanSettings, tour: Tour, altitude_rel_m: float) -> float:
+    """Estimated flight time: climb, cruise, a full stop and hold at each viewpoint, descent."""
+    speed = settings.mission.cruise_speed_m_s
+    stops = len(tour.order)
+    return (
+        altitude_rel_m / settings.climb_m_s
+        + tour.length_m / speed
+        + stops * (settings.mission.hold_s + speed / settings.accel_m_s2)
+        + altitude_rel_m / settings.descent_m_s
+    )
+
+
+__all__ = ["Leg", "Plan", "PlanSettings", "Target", "plan"]

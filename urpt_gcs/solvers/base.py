@@ -1,0 +1,137 @@
+"""The solver interface: ``Instance -> Tour``, and lower bounds every tour reports."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from urpt_gcs.errors import PlanError, SettingsError
+from urpt_gcs.gtsp import Instance
+from urpt_gcs.terrain import FloatArray
+
+# Tekdas et al.: a tour through k disjoint discs of radius r is at least k/2 * alpha * r (k >= 3).
+DISC_PACKING_ALPHA = 0.4786
+
+
+@dataclass(frozen=True, slots=True)
+class SolveSettings:
+    """What a solver may spend."""
+
+    time_limit_s: float = 5.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.time_limit_s) and self.time_limit_s > 0.0):
+            raise SettingsError(
+                f"--time-limit {self.time_limit_s} must be a positive number of seconds"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class Tour:
+    """A closed tour from the depot through viewpoints and back.
+
+    ``order`` lists viewpoint indices in flight order (the depot is implicit at both ends).
+    ``lower_bound_m`` is a proven lower bound on the length of any tour that sees every
+    target from the flight plane; ``proven_optimal`` says the tour is optimal for the
+    instance (its discretised viewpoints).
+    """
+
+    order: tuple[int, ...]
+    length_m: float
+    lower_bound_m: float
+    proven_optimal: bool
+    solver: str
+    solve_s: float
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def gap(self) -> float:
+        """How much longer the tour may be than the best possible: (L - LB) / LB."""
+        if self.proven_optimal:
+            return 0.0
+        if self.lower_bound_m <= 0.0:
+            return math.inf
+        return max(self.length_m - self.lower_bound_m, 0.0) / self.lower_bound_m
+
+
+class Solver(Protocol):
+    """Anything that turns an instance into a tour that sees every target."""
+
+    name: str
+
+    def solve(self, instance: Instance, settings: SolveSettings) -> Tour: ...
+
+
+def greedy_disjoint(centers_xy: FloatArray, radius_m: float) -> list[int]:
+    """A maximal set of pairwise disjoint discs of one radius (greedy, deterministic)."""
+    chosen: list[int] = []
+    for i, c in enumerate(centers_xy):
+        if all(np.hypot(*(c - centers_xy[j])) > 2.0 * radius_m for j in chosen):
+            chosen.append(i)
+    return chosen
+
+
+def disc_packing_bound(targets_xy: FloatArray, cone_radius_m: FloatArray) -> float:
+    """The paper's bound ``k/2 * alpha * R`` from k disjoint outer discs of radius R.
+
+    Every region lies inside the disc of its own cone radius, hence inside the disc of radius
+    ``R = max`` cone radius around its target; a tour visiting every region visits these
+    discs. Valid for k >= 3 disjoint discs, else 0.
+    """
+    if len(targets_xy) == 0:
+        return 0.0
+    radius = float(np.max(cone_radius_m))
+    k = len(greedy_disjoint(targets_xy, radius))
+    return 0.5 * k * DISC_PACKING_ALPHA * radius if k >= 3 else 0.0
+
+
+def depot_bound(depot_xy: tuple[float, float], targets_xy: FloatArray,
+                cone_radius_m: FloatArray) -> float:
+    """Twice the distance from the depot to the farthest region's enclosing disc."""
+    if len(targets_xy) == 0:
+        return 0.0
+    d = np.hypot(targets_xy[:, 0] - depot_xy[0], targets_xy[:, 1] - depot_xy[1])
+    return float(2.0 * np.max(np.maximum(d - cone_radius_m, 0.0)))
+
+
+def geometric_lower_bound(instance: Instance) -> float:
+    """The best geometric lower bound for an instance with geometry (else 0)."""
+    g = instance.geometry
+    if g is None:
+        return 0.0
+    cone = g.cone_radius_m
+    return max(disc_packing_bound(g.targets_xy, cone),
+               depot_bound(instance.depot_xy, g.targets_xy, cone))
+
+
+def finish_tour(instance: Instance, order: list[int], lower_bound_m: float, solver: str,
+                solve_s: float, proven: bool = False, notes: tuple[str, ...] = ()) -> Tour:
+    """Drop repeated viewpoints, recompute the length and check every target is seen."""
+    seen: set[int] = set()
+    unique = [v for v in order if not (v in seen or seen.add(v))]  # type: ignore[func-returns-value]
+    missing = instance.uncovered(unique)
+    if missing:
+        raise PlanError(
+            f"internal check failed: solver {solver} returned a tour that misses targets "
+            f"{missing}; try another --solver and report this"
+        )
+    length = instance.tour_length(unique)
+    if lower_bound_m > length * (1.0 + 1e-9) + 1e-6:
+        raise PlanError(
+            f"internal check failed: lower bound {lower_bound_m:.3f} m exceeds the tour "
+            f"({length:.3f} m) from solver {solver}; report this"
+        )
+    bound = min(lower_bound_m, length)
+    return Tour(
+        order=tuple(unique),
+        length_m=length,
+        lower_bound_m=bound,
+        proven_optimal=proven or length <= bound * (1.0 + 1e-9),
+        solver=solver,
+        solve_s=solve_s,
+        notes=notes,
+    )

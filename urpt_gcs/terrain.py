@@ -1,0 +1,349 @@
+"""Terrain: the part of a DSM/DEM GeoTIFF that a plan needs, in a metric projected CRS.
+
+A raster in a projected CRS with metre units is read as is (a compound CRS such as
+UTM + EGM2008 height is fine: its horizontal part is used). A raster in geographic
+coordinates, or projected in other units, is warped on read to the UTM zone of the targets.
+Only a window is ever read: :func:`read_terrain` takes the area of interest in the planning CRS.
+
+Cells that are nodata (declared nodata, NaN, or an elevation no place on Earth has) become
+NaN and are never used as an elevation: any bilinear sample touching one is NaN, and every
+caller treats NaN as "unknown ground", which blocks a line of sight and fails a clearance test.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pyproj
+import rasterio
+import rasterio.errors
+import rasterio.warp
+import rasterio.windows
+from affine import Affine
+from pyproj.aoi import AreaOfInterest
+from pyproj.database import query_utm_crs_info
+
+from urpt_gcs.errors import DemError
+
+FloatArray = npt.NDArray[np.float64]
+
+# Beyond these no terrain on Earth exists; such values are undeclared nodata fill.
+MIN_VALID_ELEVATION_M = -1000.0
+MAX_VALID_ELEVATION_M = 9000.0
+WGS84 = pyproj.CRS.from_epsg(4326)
+
+
+@dataclass(frozen=True, slots=True)
+class DemInfo:
+    """What is known about a raster before any pixel is read."""
+
+    path: Path
+    crs: pyproj.CRS
+    horizontal_crs: pyproj.CRS
+    width_px: int
+    height_px: int
+    transform: Affine
+    dtype: str
+    nodata: float | None
+
+    @property
+    def needs_warp(self) -> bool:
+        """True unless the raster is already projected in metres."""
+        return not _is_metric_projected(self.horizontal_crs)
+
+
+@dataclass(frozen=True, slots=True)
+class Terrain:
+    """Elevations on a north-up grid in a projected CRS, NaN where there is no data.
+
+    ``transform`` maps (col, row) of a pixel corner to (x, y) in ``crs``. ``read_window_px``
+    is the window read from the source raster (col_off, row_off, width, height) and
+    ``source_shape_px`` the source's (height, width), so what was read can be reported.
+    """
+
+    elevation_m: FloatArray
+    transform: Affine
+    crs: pyproj.CRS
+    source: str
+    read_window_px: tuple[int, int, int, int]
+    source_shape_px: tuple[int, int]
+
+    def __post_init__(self) -> None:
+        if self.elevation_m.ndim != 2 or self.elevation_m.dtype != np.float64:
+            raise ValueError("Terrain.elevation_m must be a 2-D float64 array")
+        if self.transform.b != 0.0 or self.transform.d != 0.0 or self.transform.e >= 0.0:
+            raise ValueError("Terrain.transform must be north-up")
+
+    @property
+    def cell_m(self) -> float:
+        """The smaller of the two pixel sizes, in metres."""
+        return float(min(abs(self.transform.a), abs(self.transform.e)))
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of the grid."""
+        rows, cols = self.elevation_m.shape
+        x0, y0 = self.transform.c, self.transform.f
+        return (x0, y0 + rows * self.transform.e, x0 + cols * self.transform.a, y0)
+
+    def sample(self, x: npt.ArrayLike, y: npt.ArrayLike) -> FloatArray:
+        """Bilinear elevation at points (x, y); NaN outside the grid or next to nodata.
+
+        Pixel values sit at pixel centres. Between the outermost centres and the grid edge
+        the edge value is used.
+        """
+        xa = np.asarray(x, dtype=np.float64)
+        ya = np.asarray(y, dtype=np.float64)
+        rows, cols = self.elevation_m.shape
+        col = (xa - self.transform.c) / self.transform.a - 0.5
+        row = (ya - self.transform.f) / self.transform.e - 0.5
+        inside = (col >= -0.5) & (col <= cols - 0.5) & (row >= -0.5) & (row <= rows - 0.5)
+        col = np.clip(np.where(inside, col, 0.0), 0.0, cols - 1.0)
+        row = np.clip(np.where(inside, row, 0.0), 0.0, rows - 1.0)
+        c0 = np.minimum(np.floor(col).astype(np.intp), max(cols - 2, 0))
+        r0 = np.minimum(np.floor(row).astype(np.intp), max(rows - 2, 0))
+        c1 = np.minimum(c0 + 1, cols - 1)
+        r1 = np.minimum(r0 + 1, rows - 1)
+        fc = col - c0
+        fr = row - r0
+        z = self.elevation_m
+        top = z[r0, c0] * (1.0 - fc) + z[r0, c1] * fc
+        bottom = z[r1, c0] * (1.0 - fc) + z[r1, c1] * fc
+        out = top * (1.0 - fr) + bottom * fr
+        return np.where(inside, out, np.nan)
+
+    def cell_max(self, xmin: float, ymin: float, xmax: float, ymax: float) -> float:
+        """Highest valid elevation of the cells overlapping a box (NaN if none)."""
+        rows, cols = self.elevation_m.shape
+        inv = ~self.transform
+        c_a, r_a = inv @ (xmin, ymax)
+        c_b, r_b = inv @ (xmax, ymin)
+        c0, c1 = max(int(math.floor(c_a)), 0), min(int(math.ceil(c_b)), cols)
+        r0, r1 = max(int(math.floor(r_a)), 0), min(int(math.ceil(r_b)), rows)
+        if c0 >= c1 or r0 >= r1:
+            return math.nan
+        block = self.elevation_m[r0:r1, c0:c1]
+        if np.all(np.isnan(block)):
+            return math.nan
+        return float(np.nanmax(block))
+
+
+def _is_metric_projected(crs: pyproj.CRS) -> bool:
+    if not crs.is_projected:
+        return False
+    units = {axis.unit_name for axis in crs.axis_info[:2]}
+    return units <= {"metre", "meter"}
+
+
+def _horizontal(crs: pyproj.CRS) -> pyproj.CRS:
+    if crs.is_compound:
+        return crs.sub_crs_list[0]
+    return crs
+
+
+def open_dem(path: Path) -> DemInfo:
+    """Check that ``path`` is a usable elevation raster and describe it without reading pixels."""
+    name = str(path)
+    if not path.exists():
+        raise DemError(f"DEM '{name}' does not exist: check the path given to --dem")
+    if path.is_dir():
+        raise DemError(f"DEM '{name}' is a folder: give the GeoTIFF file inside it to --dem")
+    try:
+        with rasterio.open(path) as src:
+            if src.crs is None:
+                raise DemError(
+                    f"DEM '{name}' has no coordinate reference system: assign one "
+                    "(e.g. gdal_edit.py -a_srs EPSG:32632) or export it georeferenced"
+                )
+            if src.count < 1:
+                raise DemError(f"DEM '{name}' has no raster band: export the DSM again")
+            transform = src.transform
+            if transform.b != 0.0 or transform.d != 0.0 or transform.e >= 0.0:
+                raise DemError(
+                    f"DEM '{name}' is rotated or not north-up: warp it north-up "
+                    "(gdalwarp) before planning"
+                )
+            crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
+            nodata = src.nodata
+            return DemInfo(
+                path=path,
+                crs=crs,
+                horizontal_crs=_horizontal(crs),
+                width_px=src.width,
+                height_px=src.height,
+                transform=transform,
+                dtype=src.dtypes[0],
+                nodata=None if nodata is None else float(nodata),
+            )
+    except rasterio.errors.RasterioIOError as exc:
+        raise DemError(
+            f"DEM '{name}' is not a readable raster ({_first_line(exc)}): give a GeoTIFF DSM/DEM"
+        ) from exc
+    except (rasterio.errors.RasterioError, pyproj.exceptions.CRSError) as exc:
+        raise DemError(f"DEM '{name}' cannot be used ({_first_line(exc)})") from exc
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def planning_crs(info: DemInfo, lon_lat_center: tuple[float, float]) -> pyproj.CRS:
+    """The metric CRS plans are made in: the DEM's own, or the UTM zone of the targets."""
+    if not info.needs_warp:
+        return info.horizontal_crs
+    lon, lat = lon_lat_center
+    zones = query_utm_crs_info(
+        datum_name="WGS 84",
+        area_of_interest=AreaOfInterest(lon, lat, lon, lat),
+    )
+    if not zones:
+        raise DemError(
+            f"DEM '{info.path}' is geographic and no UTM zone covers ({lat:.5f}, {lon:.5f}): "
+            "reproject it to a local metric CRS first"
+        )
+    # Prefer the northern/southern zone matching the hemisphere (both cover the equator).
+    wanted = "N" if lat >= 0 else "S"
+    best = next((z for z in zones if z.name.endswith(wanted)), zones[0])
+    return pyproj.CRS.from_authority(best.auth_name, best.code)
+
+
+def to_planning(info: DemInfo, crs: pyproj.CRS) -> pyproj.Transformer:
+    """Transformer from WGS84 lon/lat to the planning CRS (x, y)."""
+    return pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
+
+
+def _clean(values: npt.NDArray[np.generic], mask: npt.NDArray[np.bool_]) -> FloatArray:
+    z = values.astype(np.float64)
+    z[mask] = np.nan
+    z[(z < MIN_VALID_ELEVATION_M) | (z > MAX_VALID_ELEVATION_M)] = np.nan
+    return z
+
+
+def read_terrain(
+    info: DemInfo, crs: pyproj.CRS, area: tuple[float, float, float, float]
+) -> Terrain:
+    """Read the part of the DEM covering ``area`` = (xmin, ymin, xmax, ymax) in ``crs``.
+
+    Parameters
+    ----------
+    info
+        The raster, from :func:`open_dem`.
+    crs
+        The planning CRS, from :func:`planning_crs`.
+    area
+        Box to cover, in ``crs``. Parts outside the raster are simply absent (NaN when
+        sampled).
+
+    Returns
+    -------
+    Terrain
+        The elevations of the window; nodata as NaN.
+    """
+    try:
+        if info.needs_warp:
+            return _read_warped(info, crs, area)
+        return _read_native(info, area)
+    except rasterio.errors.RasterioError as exc:
+        raise DemError(
+            f"DEM '{info.path}' could not be read ({_first_line(exc)}): "
+            "the file may be truncated; export it again"
+        ) from exc
+
+
+def _window_for(
+    info: DemInfo, src_crs_area: tuple[float, float, float, float], pad_px: int
+) -> rasterio.windows.Window:
+    xmin, ymin, xmax, ymax = src_crs_area
+    inv = ~info.transform
+    c_a, r_a = inv @ (xmin, ymax)
+    c_b, r_b = inv @ (xmax, ymin)
+    c0 = max(int(math.floor(min(c_a, c_b))) - pad_px, 0)
+    c1 = min(int(math.ceil(max(c_a, c_b))) + pad_px, info.width_px)
+    r0 = max(int(math.floor(min(r_a, r_b))) - pad_px, 0)
+    r1 = min(int(math.ceil(max(r_a, r_b))) + pad_px, info.height_px)
+    return rasterio.windows.Window(c0, r0, max(c1 - c0, 0), max(r1 - r0, 0))
+
+
+def _read_native(info: DemInfo, area: tuple[float, float, float, float]) -> Terrain:
+    window = _window_for(info, area, pad_px=2)
+    if window.width == 0 or window.height == 0:
+        raise DemError(
+            f"DEM '{info.path}' does not cover the targets' area: check that the targets "
+            "belong to this site"
+        )
+    with rasterio.open(info.path) as src:
+        band = src.read(1, window=window, masked=True)
+    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+    return Terrain(
+        elevation_m=z,
+        transform=rasterio.windows.transform(window, info.transform),
+        crs=info.horizontal_crs,
+        source=str(info.path),
+        read_window_px=(int(window.col_off), int(window.row_off), int(window.width),
+                        int(window.height)),
+        source_shape_px=(info.height_px, info.width_px),
+    )
+
+
+def _read_warped(
+    info: DemInfo, crs: pyproj.CRS, area: tuple[float, float, float, float]
+) -> Terrain:
+    src_area = rasterio.warp.transform_bounds(crs, info.horizontal_crs, *area, densify_pts=21)
+    window = _window_for(info, src_area, pad_px=2)
+    if window.width == 0 or window.height == 0:
+        raise DemError(
+            f"DEM '{info.path}' does not cover the targets' area: check that the targets "
+            "belong to this site"
+        )
+    with rasterio.open(info.path) as src:
+        band = src.read(1, window=window, masked=True)
+    src_z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+    src_transform = rasterio.windows.transform(window, info.transform)
+    # Keep the source's resolution: the ground size of one source pixel at the area's centre.
+    cx, cy = (area[0] + area[2]) / 2.0, (area[1] + area[3]) / 2.0
+    to_src = pyproj.Transformer.from_crs(crs, info.horizontal_crs, always_xy=True)
+    from_src = pyproj.Transformer.from_crs(info.horizontal_crs, crs, always_xy=True)
+    sx, sy = to_src.transform(cx, cy)
+    ex, ey = from_src.transform(sx + abs(info.transform.a), sy)
+    nx, ny = from_src.transform(sx, sy + abs(info.transform.e))
+    res = max(min(math.hypot(ex - cx, ey - cy), math.hypot(nx - cx, ny - cy)), 1e-3)
+    xmin, ymin, xmax, ymax = area
+    cols = max(int(math.ceil((xmax - xmin) / res)) + 4, 2)
+    rows = max(int(math.ceil((ymax - ymin) / res)) + 4, 2)
+    dst_transform = Affine(res, 0.0, xmin - 2 * res, 0.0, -res, ymax + 2 * res)
+    dst = np.full((rows, cols), np.nan, dtype=np.float64)
+    rasterio.warp.reproject(
+        source=src_z,
+        destination=dst,
+        src_transform=src_transform,
+        src_crs=rasterio.crs.CRS.from_wkt(info.horizontal_crs.to_wkt()),
+        src_nodata=np.nan,
+        dst_transform=dst_transform,
+        dst_crs=rasterio.crs.CRS.from_wkt(crs.to_wkt()),
+        dst_nodata=np.nan,
+        resampling=rasterio.warp.Resampling.bilinear,
+    )
+    return Terrain(
+        elevation_m=dst,
+        transform=dst_transform,
+        crs=crs,
+        source=str(info.path),
+        read_window_px=(int(window.col_off), int(window.row_off), int(window.width),
+                        int(window.height)),
+        source_shape_px=(info.height_px, info.width_px),
+    )
+
+
+def has_any_data(info: DemInfo) -> bool:
+    """Whether the raster holds any valid elevation, from a decimated read (small in memory)."""
+    scale = max(info.width_px, info.height_px) / 512.0
+    shape = (max(int(info.height_px / max(scale, 1.0)), 1), max(int(info.width_px / max(scale, 1.0)), 1))
+    with rasterio.open(info.path) as src:
+        band = src.read(1, out_shape=shape, masked=True)
+    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+    return bool(np.isfinite(z).any())
