@@ -50,8 +50,9 @@ def write_dem(tmp_path: Path) -> WriteDem:
     return write
 
 
-def grid_xy(shape: tuple[int, int], res: float = 0.5,
-            origin: tuple[float, float] = (500_000.0, 5_200_000.0)) -> tuple[np.ndarray, np.ndarray]:
+def grid_xy(
+    shape: tuple[int, int], res: float = 0.5, origin: tuple[float, float] = (500_000.0, 5_200_000.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """Coordinates of pixel centres for a grid written by ``write_dem``."""
     rows, cols = np.indices(shape)
     return origin[0] + (cols + 0.5) * res, origin[1] - (rows + 0.5) * res

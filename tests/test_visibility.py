@@ -23,8 +23,9 @@ CENTER = (ORIGIN[0] + 100.0, ORIGIN[1] - 100.0)
 def _terrain(write_dem: WriteDem, z: np.ndarray):
     path = write_dem(z, res=RES, origin=ORIGIN)
     info = open_dem(path)
-    return read_terrain(info, info.horizontal_crs,
-                        (ORIGIN[0], ORIGIN[1] - 200.0, ORIGIN[0] + 200.0, ORIGIN[1]))
+    return read_terrain(
+        info, info.horizontal_crs, (ORIGIN[0], ORIGIN[1] - 200.0, ORIGIN[0] + 200.0, ORIGIN[1])
+    )
 
 
 def test_flat_ground_gives_the_cone_disc(write_dem: WriteDem) -> None:
@@ -119,23 +120,34 @@ def test_line_of_sight_over_and_into_a_wall(write_dem: WriteDem) -> None:
 def test_region_is_star_shaped_and_inside_the_cone(bumps, fov, tmp_path_factory) -> None:
     """Every point between the target and a ray's reach sees the target (star-shaped), and
     no reach exceeds the cone."""
-    from conftest import write_dem as _unused  # noqa: F401  (fixture module import check)
     import rasterio
+    from conftest import write_dem as _unused  # noqa: F401  (fixture module import check)
     from rasterio.transform import from_origin
 
     x, y = grid_xy((200, 200), 1.0, ORIGIN)
     z = np.full((200, 200), 100.0)
     for bx, by, bh, bw in bumps:
-        z += bh * np.exp(-((x - ORIGIN[0] - 100 - bx) ** 2 + (y - ORIGIN[1] + 100 - by) ** 2)
-                         / (2 * bw**2))
+        z += bh * np.exp(
+            -((x - ORIGIN[0] - 100 - bx) ** 2 + (y - ORIGIN[1] + 100 - by) ** 2) / (2 * bw**2)
+        )
     path = tmp_path_factory.mktemp("star") / "dem.tif"
-    with rasterio.open(path, "w", driver="GTiff", height=200, width=200, count=1,
-                       dtype="float32", crs="EPSG:32632", nodata=-10000.0,
-                       transform=from_origin(ORIGIN[0], ORIGIN[1], 1.0, 1.0)) as dst:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        height=200,
+        width=200,
+        count=1,
+        dtype="float32",
+        crs="EPSG:32632",
+        nodata=-10000.0,
+        transform=from_origin(ORIGIN[0], ORIGIN[1], 1.0, 1.0),
+    ) as dst:
         dst.write(z.astype("float32"), 1)
     info = open_dem(path)
-    terrain = read_terrain(info, info.horizontal_crs,
-                           (ORIGIN[0], ORIGIN[1] - 200.0, ORIGIN[0] + 200.0, ORIGIN[1]))
+    terrain = read_terrain(
+        info, info.horizontal_crs, (ORIGIN[0], ORIGIN[1] - 200.0, ORIGIN[0] + 200.0, ORIGIN[1])
+    )
     center = np.array([[ORIGIN[0] + 100.0, ORIGIN[1] - 100.0]])
     ground = terrain.sample(center[:, 0], center[:, 1])
     camera = Camera(altitude_m=float(z.max()) + 20.0, fov_deg=fov)
@@ -147,8 +159,13 @@ def test_region_is_star_shaped_and_inside_the_cone(bumps, fov, tmp_path_factory)
     s = reach[:, None] * fractions[None, :] - 0.5  # stay a little inside the grazing ray
     s = np.maximum(s, 0.0).ravel()
     theta = np.repeat(az, len(fractions))
-    eye = np.column_stack([center[0, 0] + s * np.cos(theta), center[0, 1] + s * np.sin(theta),
-                           np.full(len(s), camera.altitude_m)])
+    eye = np.column_stack(
+        [
+            center[0, 0] + s * np.cos(theta),
+            center[0, 1] + s * np.sin(theta),
+            np.full(len(s), camera.altitude_m),
+        ]
+    )
     tgt = np.repeat(np.array([[center[0, 0], center[0, 1], ground[0]]]), len(s), axis=0)
     assert line_of_sight(terrain, eye, tgt).all()
 

@@ -46,35 +46,95 @@ def main() -> None:
 
 @main.command("plan")
 @click.option("--dem", "dem", required=True, help="DSM/DEM GeoTIFF of the site (e.g. from Pix4D).")
-@click.option("--targets", "targets", required=True,
-              help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon).")
+@click.option(
+    "--targets", "targets", required=True, help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon)."
+)
 @click.option("--out", "out", default="out", show_default=True, help="Folder for the outputs.")
-@click.option("--fov", "fov", type=float, default=30.0, show_default=True,
-              help="Camera half-angle from nadir, degrees.")
-@click.option("--samples", type=int, default=36, show_default=True,
-              help="Azimuths sampled per visibility region.")
-@click.option("--altitude", type=float, default=None,
-              help="Flight-plane altitude in the DEM's vertical datum, metres.")
-@click.option("--clearance", type=float, default=30.0, show_default=True,
-              help="Without --altitude: metres above the highest terrain in the area.")
-@click.option("--min-clearance", type=float, default=10.0, show_default=True,
-              help="Refuse a plan whose legs pass closer than this to the terrain, metres.")
-@click.option("--home", "home", default=None, help="Take-off point LAT,LON (overrides a Home placemark).")
-@click.option("--hold", type=float, default=2.0, show_default=True, help="Hold at each viewpoint, s.")
+@click.option(
+    "--fov",
+    "fov",
+    type=float,
+    default=30.0,
+    show_default=True,
+    help="Camera half-angle from nadir, degrees.",
+)
+@click.option(
+    "--samples",
+    type=int,
+    default=36,
+    show_default=True,
+    help="Azimuths sampled per visibility region.",
+)
+@click.option(
+    "--altitude",
+    type=float,
+    default=None,
+    help="Flight-plane altitude in the DEM's vertical datum, metres.",
+)
+@click.option(
+    "--clearance",
+    type=float,
+    default=30.0,
+    show_default=True,
+    help="Without --altitude: metres above the highest terrain in the area.",
+)
+@click.option(
+    "--min-clearance",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Refuse a plan whose legs pass closer than this to the terrain, metres.",
+)
+@click.option(
+    "--home", "home", default=None, help="Take-off point LAT,LON (overrides a Home placemark)."
+)
+@click.option(
+    "--hold", type=float, default=2.0, show_default=True, help="Hold at each viewpoint, s."
+)
 @click.option("--speed", type=float, default=5.0, show_default=True, help="Cruise speed, m/s.")
-@click.option("--firmware", type=str, default="ardupilot", show_default=True,
-              help=f"Autopilot: {' or '.join(FIRMWARES)}.")
-@click.option("--solver", type=str, default="auto", show_default=True,
-              help=f"One of {', '.join(SOLVER_CHOICES)}.")
-@click.option("--time-limit", type=float, default=5.0, show_default=True,
-              help="Seconds the solver may search.")
+@click.option(
+    "--firmware",
+    type=str,
+    default="ardupilot",
+    show_default=True,
+    help=f"Autopilot: {' or '.join(FIRMWARES)}.",
+)
+@click.option(
+    "--solver",
+    type=str,
+    default="auto",
+    show_default=True,
+    help=f"One of {', '.join(SOLVER_CHOICES)}.",
+)
+@click.option(
+    "--time-limit",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Seconds the solver may search.",
+)
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", is_flag=True, help="Print nothing but errors.")
-def plan_command(dem: str, targets: str, out: str, fov: float, samples: int,
-                 altitude: float | None, clearance: float, min_clearance: float,
-                 home: str | None, hold: float, speed: float, firmware: str, solver: str,
-                 time_limit: float, seed: int, as_json: bool, quiet: bool) -> None:
+def plan_command(
+    dem: str,
+    targets: str,
+    out: str,
+    fov: float,
+    samples: int,
+    altitude: float | None,
+    clearance: float,
+    min_clearance: float,
+    home: str | None,
+    hold: float,
+    speed: float,
+    firmware: str,
+    solver: str,
+    time_limit: float,
+    seed: int,
+    as_json: bool,
+    quiet: bool,
+) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
     from urpt_gcs.planner import plan
     from urpt_gcs.products import write_products
@@ -97,8 +157,7 @@ def plan_command(dem: str, targets: str, out: str, fov: float, samples: int,
                 hover_speed_m_s=speed,
             ),
         )
-        progress = None if (quiet or as_json) else (
-            lambda msg: click.echo(f"... {msg}", err=True))
+        progress = None if (quiet or as_json) else (lambda msg: click.echo(f"... {msg}", err=True))
         result = plan(Path(dem), Path(targets), settings, progress=progress)
         data = write_products(result, Path(out))
     except UrptError as exc:
@@ -111,8 +170,13 @@ def plan_command(dem: str, targets: str, out: str, fov: float, samples: int,
 
 
 @main.command("demo-site")
-@click.option("--out", "out", default="missions/demo", show_default=True,
-              help="Folder for site.tif and targets.kml.")
+@click.option(
+    "--out",
+    "out",
+    default="missions/demo",
+    show_default=True,
+    help="Folder for site.tif and targets.kml.",
+)
 @click.option("--seed", type=int, default=7, show_default=True)
 def demo_site_command(out: str, seed: int) -> None:
     """Generate the demo site: a Pix4D-like DSM and a KML of targets."""

@@ -9,6 +9,7 @@ further in until it does, or dropped. The nadir point always sees its target.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,8 +37,9 @@ class Geometry:
 
     @property
     def cone_radius_m(self) -> FloatArray:
-        tan = np.tan(np.radians(self.fov_deg))
-        return np.maximum(self.altitude_m - self.ground_m, 0.0) * tan
+        tan = math.tan(math.radians(self.fov_deg))
+        cone: FloatArray = np.maximum(self.altitude_m - self.ground_m, 0.0) * tan
+        return cone
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,7 +60,7 @@ class Instance:
     geometry: Geometry | None = None
 
     def __post_init__(self) -> None:
-        n, m = self.covers.shape
+        n, _m = self.covers.shape
         if self.viewpoints_xy.shape != (n, 2) or self.owner.shape != (n,):
             raise ValueError("Instance arrays disagree on the number of viewpoints")
         if self.distance_m.shape != (n + 1, n + 1):
@@ -84,13 +86,14 @@ class Instance:
         """Targets that no viewpoint in ``order`` sees."""
         idx = np.asarray(order, dtype=np.int64)
         seen = self.covers[idx].any(axis=0) if idx.size else np.zeros(self.n_targets, bool)
-        return np.flatnonzero(~seen).tolist()
+        return [int(t) for t in np.flatnonzero(~seen)]
 
 
 def euclidean_matrix(points_xy: FloatArray) -> FloatArray:
     """Pairwise Euclidean distances."""
     diff = points_xy[:, None, :] - points_xy[None, :, :]
-    return np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+    dist: FloatArray = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+    return dist
 
 
 def cover_sets(
@@ -116,9 +119,7 @@ def cover_sets(
     )
     in_cone = horizontal <= cone[tg_idx]
     vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
-    eye = np.column_stack(
-        [viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)]
-    )
+    eye = np.column_stack([viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)])
     tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
     seen = line_of_sight(terrain, eye, tgt)
     covers[vp_idx[seen], tg_idx[seen]] = True
@@ -172,4 +173,3 @@ def build_instance(
             terrain_max_m=terrain_max_m,
         ),
     )
-

@@ -163,7 +163,7 @@ class MissionSettings:
 
 
 def _item(command: int, frame: int, *params: float) -> MissionItem:
-    padded = (*params, *([0.0] * (7 - len(params))))
+    padded = tuple(float(p) for p in params) + (0.0,) * (7 - len(params))
     return MissionItem(command=command, frame=frame, params=padded)  # type: ignore[arg-type]
 
 
@@ -194,26 +194,54 @@ def build_mission(
     rel = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
     cmd_frame = mavlink.MAV_FRAME_MISSION
     items: list[MissionItem] = [
-        _item(mavlink.MAV_CMD_NAV_TAKEOFF, rel, 0, 0, 0, 0, home.lat_deg, home.lon_deg,
-              altitude_rel_m),
+        _item(
+            mavlink.MAV_CMD_NAV_TAKEOFF, rel, 0, 0, 0, 0, home.lat_deg, home.lon_deg, altitude_rel_m
+        ),
     ]
     if settings.firmware == "ardupilot":
         # Pitch -90 (nadir), roll 0, yaw 0; param7 the mount mode.
         items.append(
-            _item(mavlink.MAV_CMD_DO_MOUNT_CONTROL, cmd_frame, -90, 0, 0, 0, 0, 0,
-                  mavlink.MAV_MOUNT_MODE_MAVLINK_TARGETING)
+            _item(
+                mavlink.MAV_CMD_DO_MOUNT_CONTROL,
+                cmd_frame,
+                -90,
+                0,
+                0,
+                0,
+                0,
+                0,
+                mavlink.MAV_MOUNT_MODE_MAVLINK_TARGETING,
+            )
         )
     else:
         # PX4 drives gimbals through the gimbal manager: pitch -90, yaw 0, rates NaN.
         items.append(
-            _item(mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, cmd_frame, -90, 0,
-                  math.nan, math.nan, 0, 0, 0)
+            _item(
+                mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+                cmd_frame,
+                -90,
+                0,
+                math.nan,
+                math.nan,
+                0,
+                0,
+                0,
+            )
         )
     for lat, lon in waypoints:
         yaw = 0.0 if settings.firmware == "ardupilot" else math.nan
         items.append(
-            _item(mavlink.MAV_CMD_NAV_WAYPOINT, rel, settings.hold_s, 0, 0, yaw,
-                  round_e7(lat), round_e7(lon), altitude_rel_m)
+            _item(
+                mavlink.MAV_CMD_NAV_WAYPOINT,
+                rel,
+                settings.hold_s,
+                0,
+                0,
+                yaw,
+                round_e7(lat),
+                round_e7(lon),
+                altitude_rel_m,
+            )
         )
         if settings.firmware == "ardupilot":
             # param5 = 1: take one photo now.

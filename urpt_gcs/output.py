@@ -29,8 +29,8 @@ def write_all(out_dir: Path, files: Mapping[str, str | bytes]) -> list[Path]:
     temps: list[tuple[Path, Path]] = []
     try:
         for name, content in files.items():
-            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=out_dir)
-            temps.append((Path(tmp), out_dir / name))
+            fd, tmp_name = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=out_dir)
+            temps.append((Path(tmp_name), out_dir / name))
             data = content.encode("utf-8") if isinstance(content, str) else content
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)

@@ -79,8 +79,12 @@ class PlanSettings:
             )
         if self.home is not None:
             lat, lon = self.home
-            if not (math.isfinite(lat) and -90 <= lat <= 90 and math.isfinite(lon)
-                    and -180 <= lon <= 180):
+            if not (
+                math.isfinite(lat)
+                and -90 <= lat <= 90
+                and math.isfinite(lon)
+                and -180 <= lon <= 180
+            ):
                 raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees")
 
 
@@ -144,14 +148,24 @@ def _bbox(xy: FloatArray, pad: float) -> tuple[float, float, float, float]:
     return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
-def _contains(outer: tuple[float, float, float, float],
-              inner: tuple[float, float, float, float]) -> bool:
-    return (outer[0] <= inner[0] and outer[1] <= inner[1] and outer[2] >= inner[2]
-            and outer[3] >= inner[3])
+def _contains(
+    outer: tuple[float, float, float, float], inner: tuple[float, float, float, float]
+) -> bool:
+    return (
+        outer[0] <= inner[0]
+        and outer[1] <= inner[1]
+        and outer[2] >= inner[2]
+        and outer[3] >= inner[3]
+    )
 
 
-def _check_ground(info: DemInfo, terrain: Terrain, names: list[str], lat_lon: list[tuple[float,
-                  float]], xy: FloatArray) -> FloatArray:
+def _check_ground(
+    info: DemInfo,
+    terrain: Terrain,
+    names: list[str],
+    lat_lon: list[tuple[float, float]],
+    xy: FloatArray,
+) -> FloatArray:
     """Ground elevation at each point, or an error naming the first point without one."""
     ground = terrain.sample(xy[:, 0], xy[:, 1])
     bad = np.flatnonzero(~np.isfinite(ground))
@@ -178,21 +192,29 @@ def _check_ground(info: DemInfo, terrain: Terrain, names: list[str], lat_lon: li
     )
 
 
-def _legs(terrain: Terrain, stops_xy: FloatArray, names: list[str], altitude_m: float
-          ) -> tuple[Leg, ...]:
+def _legs(
+    terrain: Terrain, stops_xy: FloatArray, names: list[str], altitude_m: float
+) -> tuple[Leg, ...]:
     """Sample every leg of the closed path through ``stops_xy`` against the terrain."""
     legs = []
     step = terrain.cell_m / 2.0
     for i in range(len(stops_xy) - 1):
         a, b = stops_xy[i], stops_xy[i + 1]
         length = float(np.hypot(*(b - a)))
-        n = max(int(math.ceil(length / step)), 1)
+        n = max(math.ceil(length / step), 1)
         t = np.linspace(0.0, 1.0, n + 1)
         z = terrain.sample(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
         known = np.isfinite(z)
         clearance = float(altitude_m - np.max(z[known])) if known.any() else math.nan
-        legs.append(Leg(names[i], names[i + 1], length, clearance,
-                        float((~known).sum() / max(n + 1, 1) * length)))
+        legs.append(
+            Leg(
+                names[i],
+                names[i + 1],
+                length,
+                clearance,
+                float((~known).sum() / max(n + 1, 1) * length),
+            )
+        )
     return tuple(legs)
 
 
@@ -253,13 +275,19 @@ def plan(
     area = _bbox(points_xy, 0.0)
     terrain = read_terrain(info, crs, _bbox(points_xy, 0.0))
     margin = _WINDOW_MARGIN_CELLS * terrain.cell_m
-    all_ground = _check_ground(info, terrain, [*names, f"home ({home_source})"],
-                               [*lat_lon, (home_lat, home_lon)], points_xy)
+    all_ground = _check_ground(
+        info,
+        terrain,
+        [*names, f"home ({home_source})"],
+        [*lat_lon, (home_lat, home_lon)],
+        points_xy,
+    )
     ground, home_ground = all_ground[:-1], float(all_ground[-1])
     for _ in range(12):
         top = float(np.nanmax(terrain.elevation_m))
-        altitude = settings.altitude_m if settings.altitude_m is not None else (
-            top + settings.clearance_m)
+        altitude = (
+            settings.altitude_m if settings.altitude_m is not None else (top + settings.clearance_m)
+        )
         reach = max(altitude - float(ground.min()), 0.0) * tan
         need = _bbox(points_xy, reach + margin)
         if _contains(area, need):
@@ -311,17 +339,34 @@ def plan(
 
     home = GeoPoint(home_lat, home_lon, home_ground)
     mission = build_mission(
-        home, _latlon(crs, instance.viewpoints_xy[list(tour.order)]),
-        altitude - home_ground, settings.mission,
+        home,
+        _latlon(crs, instance.viewpoints_xy[list(tour.order)]),
+        altitude - home_ground,
+        settings.mission,
     )
     flight_time = _flight_time(settings, tour, altitude - home_ground)
     lap("mission")
     return Plan(
-        settings=settings, dem=info, terrain=terrain, targets=targets, crs=crs,
-        targets_xy=targets_xy, ground_m=ground, home_xy=home_xy, home_ground_m=home_ground,
-        home_source=home_source, camera=camera, terrain_max_m=top, regions=regions,
-        instance=instance, tour=tour, legs=legs, mission=mission, flight_time_s=flight_time,
-        timings_s=timings, warnings=tuple(warnings),
+        settings=settings,
+        dem=info,
+        terrain=terrain,
+        targets=targets,
+        crs=crs,
+        targets_xy=targets_xy,
+        ground_m=ground,
+        home_xy=home_xy,
+        home_ground_m=home_ground,
+        home_source=home_source,
+        camera=camera,
+        terrain_max_m=top,
+        regions=regions,
+        instance=instance,
+        tour=tour,
+        legs=legs,
+        mission=mission,
+        flight_time_s=flight_time,
+        timings_s=timings,
+        warnings=tuple(warnings),
     )
 
 

@@ -87,7 +87,7 @@ def _waypoint_items(plan: Plan) -> list[tuple[float, float]]:
 
 
 def _minutes(seconds: float) -> str:
-    m, s = divmod(int(round(seconds)), 60)
+    m, s = divmod(round(seconds), 60)
     return f"{m} min {s:02d} s"
 
 
@@ -98,17 +98,22 @@ def summary_text(data: dict[str, Any]) -> str:
     elif data["gap_pct"] is None:
         quality = "no lower bound available"
     else:
-        quality = f"at most {data['gap_pct']:.1f} % above optimal (lower bound {data['lower_bound_m']:.1f} m)"
+        quality = (
+            f"at most {data['gap_pct']:.1f} % above optimal "
+            f"(lower bound {data['lower_bound_m']:.1f} m)"
+        )
     home = data["home"]
     lines = [
         f"targets        {data['targets']}  ({', '.join(data['target_names'][:6])}"
-        + (", ..." if data["targets"] > 6 else "") + ")",
+        + (", ..." if data["targets"] > 6 else "")
+        + ")",
         f"viewpoints     {data['viewpoints']} candidates, {data['tour_stops']} in the tour",
         f"tour           {data['tour_length_m']:.1f} m, {quality}",
         f"solver         {data['solver']} in {data['solve_s']:.2f} s",
         f"flight time    {_minutes(data['flight_time_s'])} (estimated at "
         f"{data['cruise_speed_m_s']:g} m/s, {data['hold_s']:g} s hold per photo)",
-        f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, {data['altitude_above_home_m']:.1f} m"
+        f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, "
+        f"{data['altitude_above_home_m']:.1f} m"
         f" above home; highest terrain {data['terrain_max_m']:.1f} m",
         f"camera         half-angle {data['fov_deg']:g} deg, {data['samples']} azimuths",
         f"home           {home['lat_deg']:.7f}, {home['lon_deg']:.7f} ({home['source']})",

@@ -2,7 +2,10 @@
 
 A raster in a projected CRS with metre units is read as is (a compound CRS such as
 UTM + EGM2008 height is fine: its horizontal part is used). A raster in geographic
-coordinates, or projected in other units, is warped on read to the UTM zone of the targets.
+coordinates, or projected in other units, is georeferenced in the UTM zone of the targets: the
+window read keeps its own pixels (no resampling, so its bilinear surface is exactly the
+source's) and gets the affine map from its pixels to UTM that fits the true projection over
+the window, to a small fraction of a cell (checked on read).
 Only a window is ever read: :func:`read_terrain` takes the area of interest in the planning CRS.
 
 Cells that are nodata (declared nodata, NaN, or an elevation no place on Earth has) become
@@ -58,11 +61,13 @@ class DemInfo:
 
 @dataclass(frozen=True, slots=True)
 class Terrain:
-    """Elevations on a north-up grid in a projected CRS, NaN where there is no data.
+    """Elevations of a raster window georeferenced in a projected, metric CRS.
 
-    ``transform`` maps (col, row) of a pixel corner to (x, y) in ``crs``. ``read_window_px``
-    is the window read from the source raster (col_off, row_off, width, height) and
-    ``source_shape_px`` the source's (height, width), so what was read can be reported.
+    ``transform`` maps (col, row) of a pixel corner to (x, y) in ``crs``; it is north-up for a
+    projected source and a fitted affine map for a geographic one. NaN marks no data.
+    ``read_window_px`` is the window read from the source raster (col_off, row_off, width,
+    height) and ``source_shape_px`` the source's (height, width), so what was read can be
+    reported.
     """
 
     elevation_m: FloatArray
@@ -75,20 +80,23 @@ class Terrain:
     def __post_init__(self) -> None:
         if self.elevation_m.ndim != 2 or self.elevation_m.dtype != np.float64:
             raise ValueError("Terrain.elevation_m must be a 2-D float64 array")
-        if self.transform.b != 0.0 or self.transform.d != 0.0 or self.transform.e >= 0.0:
-            raise ValueError("Terrain.transform must be north-up")
+        if abs(self.transform.determinant) < 1e-12:
+            raise ValueError("Terrain.transform must be invertible")
 
     @property
     def cell_m(self) -> float:
-        """The smaller of the two pixel sizes, in metres."""
-        return float(min(abs(self.transform.a), abs(self.transform.e)))
+        """The shorter side of a pixel, in metres."""
+        t = self.transform
+        return float(min(math.hypot(t.a, t.d), math.hypot(t.b, t.e)))
 
-    @property
-    def bounds(self) -> tuple[float, float, float, float]:
-        """(xmin, ymin, xmax, ymax) of the grid."""
-        rows, cols = self.elevation_m.shape
-        x0, y0 = self.transform.c, self.transform.f
-        return (x0, y0 + rows * self.transform.e, x0 + cols * self.transform.a, y0)
+    def pixel_coords(self, x: npt.ArrayLike, y: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Fractional (col, row) of points, with pixel centres at whole numbers."""
+        inv = ~self.transform
+        xa = np.asarray(x, dtype=np.float64)
+        ya = np.asarray(y, dtype=np.float64)
+        col = inv.a * xa + inv.b * ya + inv.c - 0.5
+        row = inv.d * xa + inv.e * ya + inv.f - 0.5
+        return col, row
 
     def sample(self, x: npt.ArrayLike, y: npt.ArrayLike) -> FloatArray:
         """Bilinear elevation at points (x, y); NaN outside the grid or next to nodata.
@@ -96,11 +104,8 @@ class Terrain:
         Pixel values sit at pixel centres. Between the outermost centres and the grid edge
         the edge value is used.
         """
-        xa = np.asarray(x, dtype=np.float64)
-        ya = np.asarray(y, dtype=np.float64)
+        col, row = self.pixel_coords(x, y)
         rows, cols = self.elevation_m.shape
-        col = (xa - self.transform.c) / self.transform.a - 0.5
-        row = (ya - self.transform.f) / self.transform.e - 0.5
         inside = (col >= -0.5) & (col <= cols - 0.5) & (row >= -0.5) & (row <= rows - 0.5)
         col = np.clip(np.where(inside, col, 0.0), 0.0, cols - 1.0)
         row = np.clip(np.where(inside, row, 0.0), 0.0, rows - 1.0)
@@ -115,21 +120,6 @@ class Terrain:
         bottom = z[r1, c0] * (1.0 - fc) + z[r1, c1] * fc
         out = top * (1.0 - fr) + bottom * fr
         return np.where(inside, out, np.nan)
-
-    def cell_max(self, xmin: float, ymin: float, xmax: float, ymax: float) -> float:
-        """Highest valid elevation of the cells overlapping a box (NaN if none)."""
-        rows, cols = self.elevation_m.shape
-        inv = ~self.transform
-        c_a, r_a = inv @ (xmin, ymax)
-        c_b, r_b = inv @ (xmax, ymin)
-        c0, c1 = max(int(math.floor(c_a)), 0), min(int(math.ceil(c_b)), cols)
-        r0, r1 = max(int(math.floor(r_a)), 0), min(int(math.ceil(r_b)), rows)
-        if c0 >= c1 or r0 >= r1:
-            return math.nan
-        block = self.elevation_m[r0:r1, c0:c1]
-        if np.all(np.isnan(block)):
-            return math.nan
-        return float(np.nanmax(block))
 
 
 def _is_metric_projected(crs: pyproj.CRS) -> bool:
@@ -262,10 +252,10 @@ def _window_for(
     inv = ~info.transform
     c_a, r_a = inv @ (xmin, ymax)
     c_b, r_b = inv @ (xmax, ymin)
-    c0 = max(int(math.floor(min(c_a, c_b))) - pad_px, 0)
-    c1 = min(int(math.ceil(max(c_a, c_b))) + pad_px, info.width_px)
-    r0 = max(int(math.floor(min(r_a, r_b))) - pad_px, 0)
-    r1 = min(int(math.ceil(max(r_a, r_b))) + pad_px, info.height_px)
+    c0 = max(math.floor(min(c_a, c_b)) - pad_px, 0)
+    c1 = min(math.ceil(max(c_a, c_b)) + pad_px, info.width_px)
+    r0 = max(math.floor(min(r_a, r_b)) - pad_px, 0)
+    r1 = min(math.ceil(max(r_a, r_b)) + pad_px, info.height_px)
     return rasterio.windows.Window(c0, r0, max(c1 - c0, 0), max(r1 - r0, 0))
 
 
@@ -284,8 +274,12 @@ def _read_native(info: DemInfo, area: tuple[float, float, float, float]) -> Terr
         transform=rasterio.windows.transform(window, info.transform),
         crs=info.horizontal_crs,
         source=str(info.path),
-        read_window_px=(int(window.col_off), int(window.row_off), int(window.width),
-                        int(window.height)),
+        read_window_px=(
+            int(window.col_off),
+            int(window.row_off),
+            int(window.width),
+            int(window.height),
+        ),
         source_shape_px=(info.height_px, info.width_px),
     )
 
@@ -302,47 +296,57 @@ def _read_warped(
         )
     with rasterio.open(info.path) as src:
         band = src.read(1, window=window, masked=True)
-    src_z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
-    src_transform = rasterio.windows.transform(window, info.transform)
-    # Keep the source's resolution: the ground size of one source pixel at the area's centre.
-    cx, cy = (area[0] + area[2]) / 2.0, (area[1] + area[3]) / 2.0
-    to_src = pyproj.Transformer.from_crs(crs, info.horizontal_crs, always_xy=True)
-    from_src = pyproj.Transformer.from_crs(info.horizontal_crs, crs, always_xy=True)
-    sx, sy = to_src.transform(cx, cy)
-    ex, ey = from_src.transform(sx + abs(info.transform.a), sy)
-    nx, ny = from_src.transform(sx, sy + abs(info.transform.e))
-    res = max(min(math.hypot(ex - cx, ey - cy), math.hypot(nx - cx, ny - cy)), 1e-3)
-    xmin, ymin, xmax, ymax = area
-    cols = max(int(math.ceil((xmax - xmin) / res)) + 4, 2)
-    rows = max(int(math.ceil((ymax - ymin) / res)) + 4, 2)
-    dst_transform = Affine(res, 0.0, xmin - 2 * res, 0.0, -res, ymax + 2 * res)
-    dst = np.full((rows, cols), np.nan, dtype=np.float64)
-    rasterio.warp.reproject(
-        source=src_z,
-        destination=dst,
-        src_transform=src_transform,
-        src_crs=rasterio.crs.CRS.from_wkt(info.horizontal_crs.to_wkt()),
-        src_nodata=np.nan,
-        dst_transform=dst_transform,
-        dst_crs=rasterio.crs.CRS.from_wkt(crs.to_wkt()),
-        dst_nodata=np.nan,
-        resampling=rasterio.warp.Resampling.bilinear,
-    )
-    return Terrain(
-        elevation_m=dst,
-        transform=dst_transform,
+    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+    transform, error_m = _fit_affine(info, crs, window)
+    terrain = Terrain(
+        elevation_m=z,
+        transform=transform,
         crs=crs,
         source=str(info.path),
-        read_window_px=(int(window.col_off), int(window.row_off), int(window.width),
-                        int(window.height)),
+        read_window_px=(
+            int(window.col_off),
+            int(window.row_off),
+            int(window.width),
+            int(window.height),
+        ),
         source_shape_px=(info.height_px, info.width_px),
     )
+    if error_m > max(0.05 * terrain.cell_m, 0.005):
+        raise DemError(
+            f"DEM '{info.path}' is in {info.horizontal_crs.name} and the targets spread too far "
+            f"to plan in one flat map ({error_m:.2f} m distortion): reproject the DEM to "
+            "the local UTM zone (gdalwarp -t_srs) or plan fewer targets at a time"
+        )
+    return terrain
+
+
+def _fit_affine(
+    info: DemInfo, crs: pyproj.CRS, window: rasterio.windows.Window
+) -> tuple[Affine, float]:
+    """Least-squares affine map from window pixels to ``crs``, and its worst error in metres."""
+    cols = np.linspace(0.0, float(window.width), 7)
+    rows = np.linspace(0.0, float(window.height), 7)
+    cc, rr = (a.ravel() for a in np.meshgrid(cols, rows))
+    t = info.transform
+    sx = t.a * (cc + window.col_off) + t.b * (rr + window.row_off) + t.c
+    sy = t.d * (cc + window.col_off) + t.e * (rr + window.row_off) + t.f
+    to_crs = pyproj.Transformer.from_crs(info.horizontal_crs, crs, always_xy=True)
+    x, y = to_crs.transform(sx, sy)
+    design = np.column_stack([cc, rr, np.ones_like(cc)])
+    (a, b, c), *_ = np.linalg.lstsq(design, np.asarray(x), rcond=None)
+    (d, e, f), *_ = np.linalg.lstsq(design, np.asarray(y), rcond=None)
+    fitted = design @ np.array([[a, d], [b, e], [c, f]])
+    error = float(np.max(np.hypot(fitted[:, 0] - x, fitted[:, 1] - y)))
+    return Affine(float(a), float(b), float(c), float(d), float(e), float(f)), error
 
 
 def has_any_data(info: DemInfo) -> bool:
     """Whether the raster holds any valid elevation, from a decimated read (small in memory)."""
     scale = max(info.width_px, info.height_px) / 512.0
-    shape = (max(int(info.height_px / max(scale, 1.0)), 1), max(int(info.width_px / max(scale, 1.0)), 1))
+    shape = (
+        max(int(info.height_px / max(scale, 1.0)), 1),
+        max(int(info.width_px / max(scale, 1.0)), 1),
+    )
     with rasterio.open(info.path) as src:
         band = src.read(1, out_shape=shape, masked=True)
     z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))

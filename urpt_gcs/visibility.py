@@ -80,7 +80,9 @@ class Region:
         """Boundary samples, each moved ``inset_m`` towards the target (not past it)."""
         r = np.maximum(self.reach_m - inset_m, 0.0)
         cx, cy = self.center_xy
-        return np.column_stack([cx + r * np.cos(self.azimuth_rad), cy + r * np.sin(self.azimuth_rad)])
+        return np.column_stack(
+            [cx + r * np.cos(self.azimuth_rad), cy + r * np.sin(self.azimuth_rad)]
+        )
 
 
 def azimuths(samples: int) -> FloatArray:
@@ -96,22 +98,22 @@ def _grid_crossings(
     """Distances along rays ``(x0, y0) + s (ux, uy)`` where they cross the lines through pixel
     centres, the breaks of the bilinear surface: the first ``n`` of each family, with
     ``inf`` where a ray runs parallel to a family. Shape ``broadcast(x0, ux) + (2n,)``."""
-    t = terrain.transform
+    inv = ~terrain.transform
+    col0, row0 = terrain.pixel_coords(x0, y0)
     out = []
-    for origin, pixel, start, u in (
-        (t.c + t.a / 2.0, t.a, x0, ux),
-        (t.f + t.e / 2.0, t.e, y0, uy),
+    for start, rate in (
+        (col0, inv.a * np.asarray(ux) + inv.b * np.asarray(uy)),
+        (row0, inv.d * np.asarray(ux) + inv.e * np.asarray(uy)),
     ):
-        u = np.asarray(u, dtype=np.float64)[..., None]
+        rate = np.asarray(rate, dtype=np.float64)[..., None]
         start = np.asarray(start, dtype=np.float64)[..., None]
-        index = (start - origin) / pixel  # fractional line index of the ray's start
-        direction = np.sign(u * pixel)
-        first = np.where(direction > 0, np.floor(index) + 1.0, np.ceil(index) - 1.0)
-        k = np.arange(n, dtype=np.float64)
-        lines = origin + (first + direction * k) * pixel
+        first = np.where(rate > 0, np.floor(start) + 1.0, np.ceil(start) - 1.0)
+        lines = first + np.sign(rate) * np.arange(n, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
-            dist = (lines - start) / u
-        out.append(np.where(np.abs(u) > 1e-12, dist, np.inf))
+            dist = (lines - start) / rate
+        out.append(np.where(np.abs(rate) > 1e-12, dist, np.inf))
+    # The slope of the terrain right at the start: the limit of (z(s) - z(0)) / s.
+    out.append(np.full((*out[0].shape[:-1], 1), 1e-3 * terrain.cell_m))
     return np.concatenate(np.broadcast_arrays(*out), axis=-1)
 
 
@@ -135,9 +137,9 @@ def ray_reach(
     reach = np.zeros((m, len(azimuth_rad)), dtype=np.float64)
     cos_a, sin_a = np.cos(azimuth_rad), np.sin(azimuth_rad)
     longest = float(np.max(cone, initial=0.0))
-    n_uniform = max(int(math.ceil(longest / step)), 1)
-    n_cross = int(math.ceil(longest / terrain.cell_m)) + 2
-    per_target = len(azimuth_rad) * (n_uniform + 2 * n_cross)
+    n_uniform = max(math.ceil(longest / step), 1)
+    n_cross = math.ceil(longest / terrain.cell_m) + 2
+    per_target = len(azimuth_rad) * (n_uniform + 2 * n_cross + 1)
     chunk = max(_CHUNK_SAMPLES // per_target, 1)
     uniform = np.arange(1, n_uniform + 1, dtype=np.float64) * step
     for lo in range(0, m, chunk):
@@ -150,8 +152,9 @@ def ray_reach(
         )
         s = np.where((s > 0.0) & (s < cone[lo:hi, None, None]), s, np.inf)
         with np.errstate(invalid="ignore"):
-            z = terrain.sample(x0[..., None] + cos_a[None, :, None] * s,
-                               y0[..., None] + sin_a[None, :, None] * s)  # (k, d, n)
+            z = terrain.sample(
+                x0[..., None] + cos_a[None, :, None] * s, y0[..., None] + sin_a[None, :, None] * s
+            )  # (k, d, n)
         h = height[lo:hi, None, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             slope = (z - ground_m[lo:hi, None, None]) / s
@@ -234,15 +237,15 @@ def line_of_sight(
     # Sort by length so each chunk pads to a similar number of samples.
     order = np.argsort(length)
     for lo in range(0, len(order), 4096):
-        idx = order[lo:lo + 4096]
+        idx = order[lo : lo + 4096]
         longest = float(length[idx].max())
         if longest <= 0.0:
             continue
-        n_uniform = max(int(math.ceil(longest / step)), 1)
-        n_cross = int(math.ceil(longest / terrain.cell_m)) + 2
-        sub = max(_CHUNK_SAMPLES // (n_uniform + 2 * n_cross), 1)
+        n_uniform = max(math.ceil(longest / step), 1)
+        n_cross = math.ceil(longest / terrain.cell_m) + 2
+        sub = max(_CHUNK_SAMPLES // (n_uniform + 2 * n_cross + 1), 1)
         for lo2 in range(0, len(idx), sub):
-            j = idx[lo2:lo2 + sub]
+            j = idx[lo2 : lo2 + sub]
             seg = np.maximum(length[j], 1e-12)
             ux, uy = dx[j] / seg, dy[j] / seg
             x0, y0 = tgt[j, 0], tgt[j, 1]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance
-from urpt_gcs.solvers.base import SolveSettings, Solver, Tour
+from urpt_gcs.solvers.base import Solver, SolveSettings, Tour
 from urpt_gcs.solvers.routing import RoutingSolver
 
 SOLVERS: dict[str, type[Solver]] = {"ortools": RoutingSolver}

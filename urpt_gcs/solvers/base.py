@@ -89,8 +89,9 @@ def disc_packing_bound(targets_xy: FloatArray, cone_radius_m: FloatArray) -> flo
     return 0.5 * k * DISC_PACKING_ALPHA * radius if k >= 3 else 0.0
 
 
-def depot_bound(depot_xy: tuple[float, float], targets_xy: FloatArray,
-                cone_radius_m: FloatArray) -> float:
+def depot_bound(
+    depot_xy: tuple[float, float], targets_xy: FloatArray, cone_radius_m: FloatArray
+) -> float:
     """Twice the distance from the depot to the farthest region's enclosing disc."""
     if len(targets_xy) == 0:
         return 0.0
@@ -104,12 +105,20 @@ def geometric_lower_bound(instance: Instance) -> float:
     if g is None:
         return 0.0
     cone = g.cone_radius_m
-    return max(disc_packing_bound(g.targets_xy, cone),
-               depot_bound(instance.depot_xy, g.targets_xy, cone))
+    return max(
+        disc_packing_bound(g.targets_xy, cone), depot_bound(instance.depot_xy, g.targets_xy, cone)
+    )
 
 
-def finish_tour(instance: Instance, order: list[int], lower_bound_m: float, solver: str,
-                solve_s: float, proven: bool = False, notes: tuple[str, ...] = ()) -> Tour:
+def finish_tour(
+    instance: Instance,
+    order: list[int],
+    lower_bound_m: float,
+    solver: str,
+    solve_s: float,
+    proven: bool = False,
+    notes: tuple[str, ...] = (),
+) -> Tour:
     """Drop repeated viewpoints, recompute the length and check every target is seen."""
     seen: set[int] = set()
     unique = [v for v in order if not (v in seen or seen.add(v))]  # type: ignore[func-returns-value]

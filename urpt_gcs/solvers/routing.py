@@ -43,18 +43,14 @@ class RoutingSolver:
             members = (np.flatnonzero(tg == t) + 1).tolist()
             routing.AddDisjunction([manager.NodeToIndex(n) for n in members])
         params = pywrapcp.DefaultRoutingSearchParameters()
-        params.first_solution_strategy = (
-            routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
-        )
+        params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
         params.local_search_metaheuristic = (
             routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
         )
         params.time_limit.FromMilliseconds(max(int(settings.time_limit_s * 1000), 1))
         solution = routing.SolveWithParameters(params)
         if solution is None:
-            raise PlanError(
-                "OR-Tools found no tour within the time limit: raise --time-limit"
-            )
+            raise PlanError("OR-Tools found no tour within the time limit: raise --time-limit")
         order: list[int] = []
         index = routing.Start(0)
         while not routing.IsEnd(index):

@@ -1,0 +1,148 @@
+"""An independent check of a planned mission against the DEM.
+
+It shares no code with ``urpt_gcs``: it reads the raster itself with rasterio, in the raster's
+own CRS (no warping), interpolates with scipy's ``map_coordinates`` and measures ground
+distances on the WGS84 ellipsoid with pyproj's ``Geod``. The mission comes from the written
+``.waypoints`` file, read with pymavlink's loader.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyproj
+import rasterio
+from pymavlink import mavutil, mavwp
+from scipy.ndimage import map_coordinates
+
+GEOD = pyproj.Geod(ellps="WGS84")
+
+
+@dataclass
+class Raster:
+    z: np.ndarray
+    transform: rasterio.Affine
+    to_src: pyproj.Transformer
+    cell: float  # in the raster's units
+
+    def height(self, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        x, y = self.to_src.transform(lon, lat)
+        col = (np.asarray(x) - self.transform.c) / self.transform.a - 0.5
+        row = (np.asarray(y) - self.transform.f) / self.transform.e - 0.5
+        return map_coordinates(
+            self.z, [row, col], order=1, mode="constant", cval=np.nan, prefilter=False
+        )
+
+
+def load_raster(path: Path) -> Raster:
+    with rasterio.open(path) as src:
+        band = src.read(1, masked=True).astype(np.float64)
+        z = band.filled(np.nan)
+        crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
+        if crs.is_compound:
+            crs = crs.sub_crs_list[0]
+        return Raster(
+            z=z,
+            transform=src.transform,
+            to_src=pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True),
+            cell=min(abs(src.transform.a), abs(src.transform.e)),
+        )
+
+
+@dataclass
+class FlownMission:
+    home: tuple[float, float, float]  # lat, lon, AMSL
+    waypoints: list[tuple[float, float, float]]  # lat, lon, AMSL
+
+
+def read_waypoints_file(path: Path) -> FlownMission:
+    loader = mavwp.MAVWPLoader()
+    loader.load(str(path))
+    items = [loader.wp(i) for i in range(loader.count())]
+    home = items[0]
+    assert home.frame == mavutil.mavlink.MAV_FRAME_GLOBAL
+    wps = [
+        (w.x, w.y, home.z + w.z)
+        for w in items[1:]
+        if w.command == mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
+        and w.frame == mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+    ]
+    return FlownMission(home=(home.x, home.y, home.z), waypoints=wps)
+
+
+def _segment(
+    raster: Raster,
+    a: tuple[float, float],
+    b: tuple[float, float],
+    metres: float,
+    cells_per_sample: float = 0.125,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """lon, lat and fraction t of dense samples from a=(lat, lon) to b."""
+    xa, ya = raster.to_src.transform(a[1], a[0])
+    xb, yb = raster.to_src.transform(b[1], b[0])
+    length_cells = math.hypot(xb - xa, yb - ya) / raster.cell
+    n = max(int(length_cells / cells_per_sample), 2) + 1
+    t = np.linspace(0.0, 1.0, n)
+    lon = a[1] + (b[1] - a[1]) * t
+    lat = a[0] + (b[0] - a[0]) * t
+    return lon, lat, t
+
+
+def sees(
+    raster: Raster, target: tuple[float, float], eye: tuple[float, float, float], fov_deg: float
+) -> tuple[bool, str]:
+    """Whether a camera at eye=(lat, lon, AMSL) sees target=(lat, lon) on the ground."""
+    z_t = float(raster.height(np.array([target[1]]), np.array([target[0]]))[0])
+    if not math.isfinite(z_t):
+        return False, "target on unknown ground"
+    _, _, dist = GEOD.inv(target[1], target[0], eye[1], eye[0])
+    cone = (eye[2] - z_t) * math.tan(math.radians(fov_deg))
+    if dist > cone * 1.001 + 0.01:
+        return False, f"outside the cone ({dist:.2f} m > {cone:.2f} m)"
+    lon, lat, t = _segment(raster, target, eye[:2], dist)
+    inner = (t > 0.0) & (t < 1.0)
+    ground = raster.height(lon[inner], lat[inner])
+    line = z_t + (eye[2] - z_t) * t[inner]
+    above = ~(ground <= line + 1e-6)
+    if above.any():
+        k = int(np.argmax(above))
+        return False, f"blocked at t={t[inner][k]:.3f} (ground {ground[k]:.2f} > {line[k]:.2f})"
+    return True, ""
+
+
+def check_mission(
+    dem: Path,
+    waypoints_file: Path,
+    targets: list[tuple[str, float, float]],
+    fov_deg: float,
+    min_clearance_m: float = 0.0,
+) -> list[str]:
+    """Every problem found: unseen targets and legs that clip the terrain."""
+    raster = load_raster(dem)
+    flown = read_waypoints_file(waypoints_file)
+    problems = []
+    for name, lat, lon in targets:
+        reasons = []
+        for eye in flown.waypoints:
+            ok, why = sees(raster, (lat, lon), eye, fov_deg)
+            if ok:
+                break
+            reasons.append(why)
+        else:
+            problems.append(f"target {name} is seen from no waypoint: {sorted(set(reasons))[:3]}")
+    altitude = {round(w[2], 3) for w in flown.waypoints}
+    assert len(altitude) == 1, "the flight plane is not constant"
+    h = flown.waypoints[0][2]
+    path = [flown.home[:2], *[w[:2] for w in flown.waypoints], flown.home[:2]]
+    for k, (a, b) in enumerate(itertools.pairwise(path), start=1):
+        _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
+        lon, lat, _ = _segment(raster, a, b, dist)
+        ground = raster.height(lon, lat)
+        known = ground[np.isfinite(ground)]
+        if known.size and float(known.max()) > h - min_clearance_m:
+            problems.append(f"leg {k} passes {h - float(known.max()):.2f} m over the terrain")
+    return problems

@@ -1,0 +1,333 @@
+"""Tests for urpt_gcs.targets: reading target files and rejecting bad ones."""
+
+from __future__ import annotations
+
+import time
+import zipfile
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from urpt_gcs.errors import TargetsError
+from urpt_gcs.targets import Target, TargetSet, read_targets
+
+DATA = Path(__file__).parent / "data"
+TARGETS = DATA / "targets"
+BAD = DATA / "bad"
+
+LAUNCH = Target("Launch", 47.3769, 8.5401)
+BRIDGE = Target("Bridge pier", 47.3781, 8.5412)
+
+
+def _names(result: TargetSet) -> list[str]:
+    return [t.name for t in result.targets]
+
+
+def _assert_error(path: Path, fragment: str) -> str:
+    with pytest.raises(TargetsError) as caught:
+        read_targets(path)
+    message = str(caught.value)
+    assert len(message.splitlines()) == 1, message
+    assert message.startswith(f"targets file '{path}"), message
+    assert fragment in message, message
+    return message
+
+
+def _kmz(path: Path, members: dict[str, bytes]) -> Path:
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    return path
+
+
+# --- good files ----------------------------------------------------------------------------
+
+
+def test_kml_nested_folders_multigeometry_and_home() -> None:
+    result = read_targets(TARGETS / "nested_folders.kml")
+
+    assert result.home == LAUNCH
+    assert result.targets == (
+        BRIDGE,
+        Target("T2", 47.3790, 8.5420),  # unnamed: numbered among targets, home not counted
+        Target("Masts-1", 47.3801, 8.5431),
+        Target("Masts-2", 47.3802, 8.5432),
+    )
+    assert result.source == str(TARGETS / "nested_folders.kml")
+
+
+@pytest.mark.parametrize(
+    ("filename", "home", "targets"),
+    [
+        (
+            "google_earth_kml21.kml",
+            Target("home", 37.4220, -122.0841),
+            (Target("Antenna", 37.4228, -122.0822),),
+        ),
+        (
+            "no_namespace.kml",
+            None,
+            (Target("Chimney", 48.8584, 2.2945), Target("Gate", 48.8590, 2.2950)),
+        ),
+    ],
+)
+def test_kml_other_namespaces(
+    filename: str, home: Target | None, targets: tuple[Target, ...]
+) -> None:
+    result = read_targets(TARGETS / filename)
+
+    assert result.home == home
+    assert result.targets == targets
+
+
+def test_kmz_reads_doc_kml(tmp_path: Path) -> None:
+    kml = (TARGETS / "nested_folders.kml").read_bytes()
+    path = _kmz(tmp_path / "targets.kmz", {"files/icon.png": b"\x89PNG", "doc.kml": kml})
+
+    result = read_targets(path)
+
+    assert result == TargetSet(
+        read_targets(TARGETS / "nested_folders.kml").targets, LAUNCH, str(path)
+    )
+
+
+def test_kmz_without_doc_kml_takes_the_first_kml(tmp_path: Path) -> None:
+    first = (TARGETS / "no_namespace.kml").read_bytes()
+    second = (TARGETS / "nested_folders.kml").read_bytes()
+    path = _kmz(tmp_path / "targets.kmz", {"layers/a.KML": first, "layers/b.kml": second})
+
+    assert _names(read_targets(path)) == ["Chimney", "Gate"]
+
+
+def test_geojson_names_multipoint_and_home() -> None:
+    result = read_targets(TARGETS / "points.geojson")
+
+    assert result.home == Target("Home", 47.3769, 8.5401)
+    assert result.targets == (
+        Target("Mast", 47.3781, 8.5412),
+        Target("Roof", 47.3790, 8.5420),
+        Target("7", 47.3795, 8.5425),
+        Target("T4", 47.3801, 8.5431),
+        Target("T5", 47.3802, 8.5432),
+    )
+
+
+@pytest.mark.parametrize(
+    "document",
+    [
+        '{"type": "Point", "coordinates": [8.5412, 47.3781]}',
+        '{"type": "Feature", "properties": {"name": "Bridge pier"},'
+        ' "geometry": {"type": "Point", "coordinates": [8.5412, 47.3781]}}',
+        '{"type": "GeometryCollection",'
+        ' "geometries": [{"type": "Point", "coordinates": [8.5412, 47.3781]}]}',
+    ],
+)
+def test_geojson_single_feature_or_bare_geometry(tmp_path: Path, document: str) -> None:
+    path = tmp_path / "one.json"
+    path.write_text(document)
+
+    result = read_targets(path)
+
+    assert [(t.lat_deg, t.lon_deg) for t in result.targets] == [(47.3781, 8.5412)]
+    assert result.home is None
+
+
+def test_csv_names_quoting_blank_lines_and_home() -> None:
+    result = read_targets(TARGETS / "points.csv")
+
+    assert result.home == LAUNCH
+    assert result.targets == (
+        BRIDGE,
+        Target("T2", 47.3790, 8.5420),
+        Target("Tower, east", 47.3801, 8.5431),
+    )
+
+
+def test_csv_semicolons_decimal_commas_and_long_column_names() -> None:
+    result = read_targets(TARGETS / "points_semicolon.csv")
+
+    assert result.targets == (BRIDGE, Target("Roof", 47.3790, 8.5420))
+
+
+def test_csv_lng_column_without_names(tmp_path: Path) -> None:
+    path = tmp_path / "points.csv"
+    path.write_text("LNG,Lat\n8.5412,47.3781\n8.5420,47.3790\n")
+
+    assert read_targets(path).targets == (
+        Target("T1", 47.3781, 8.5412),
+        Target("T2", 47.3790, 8.5420),
+    )
+
+
+@pytest.mark.parametrize("name", ["Home", "home", " LAUNCH ", "Launch", "hOmE"])
+def test_home_is_detected_case_insensitively(tmp_path: Path, name: str) -> None:
+    path = tmp_path / "points.csv"
+    path.write_text(f"name,lat,lon\nBridge pier,47.3781,8.5412\n{name},47.3769,8.5401\n")
+
+    result = read_targets(path)
+
+    assert result.home == Target(name.strip(), 47.3769, 8.5401)
+    assert result.targets == (BRIDGE,)
+
+
+def test_a_name_that_only_starts_with_home_is_a_target(tmp_path: Path) -> None:
+    path = tmp_path / "points.csv"
+    path.write_text("name,lat,lon\nHomestead,47.3781,8.5412\n")
+
+    result = read_targets(path)
+
+    assert result.home is None
+    assert _names(result) == ["Homestead"]
+
+
+def test_source_is_the_path_as_given(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(TARGETS)
+
+    assert read_targets(Path("points.csv")).source == "points.csv"
+
+
+# --- bad files -----------------------------------------------------------------------------
+
+BAD_FILES = [
+    ("kml_malformed.kml", "is not well-formed XML (mismatched tag, line 3, column 65)"),
+    ("kml_entity_expansion.kml", "refuses XML entity declarations"),
+    ("kml_external_entity.kml", "refuses XML entity declarations"),
+    ("kml_no_points.kml", "contains no Point placemarks"),
+    ("kml_bad_coordinates.kml", "placemark 2 'Tower' with <coordinates> 'east of the bridge'"),
+    ("kml_lon_out_of_range.kml", "point 'Tower' (placemark 2) with longitude 200.0"),
+    ("kmz_not_a_zip.kmz", "is not a readable KMZ (zip) archive"),
+    ("geojson_polygons_only.geojson", "contains no Point features"),
+    ("geojson_malformed.geojson", "is not valid JSON (Expecting value, line 4, column 1)"),
+    ("geojson_not_geojson.json", "is not GeoJSON"),
+    (
+        "geojson_bad_coordinates.geojson",
+        'point in feature 1 with coordinates \'["8.54", "47.37"]\'',
+    ),
+    ("csv_missing_column.csv", "has no 'lon' column"),
+    ("csv_non_numeric.csv", "lat value 'forty-seven' in row 3"),
+    ("csv_nan_lat.csv", "point 'Roof' (row 3) with latitude nan, not finite"),
+    (
+        "csv_lat_out_of_range.csv",
+        "point 'Roof' (row 3) with latitude 95.0, outside [-90, 90]",
+    ),
+    ("csv_header_only.csv", "has a header but no data rows"),
+    ("duplicate_targets.kml", "'Bridge' (placemark 1) and point 'Bridge again' (placemark 3)"),
+    ("empty.kml", "is empty"),
+    ("two_homes.kml", "names two homes, point 'Home' (placemark 1) and point 'launch'"),
+    ("only_home.kml", "has no targets besides the home point"),
+    ("unknown_extension.txt", "has an unknown extension '.txt'"),
+]
+
+
+@pytest.mark.parametrize(("filename", "fragment"), BAD_FILES)
+def test_bad_file_gives_one_line_targets_error(filename: str, fragment: str) -> None:
+    _assert_error(BAD / filename, fragment)
+
+
+def test_entity_expansion_is_refused_quickly_without_expanding() -> None:
+    start = time.perf_counter()
+    message = _assert_error(BAD / "kml_entity_expansion.kml", "refuses XML entity declarations")
+
+    assert time.perf_counter() - start < 1.0
+    assert "lol" not in message
+
+
+def test_external_entity_is_not_resolved() -> None:
+    message = _assert_error(BAD / "kml_external_entity.kml", "refuses XML entity declarations")
+
+    assert "root" not in message
+
+
+def test_kmz_without_kml(tmp_path: Path) -> None:
+    path = _kmz(
+        tmp_path / "kmz_without_kml.kmz", {"files/icon.png": b"\x89PNG", "readme.txt": b"hi"}
+    )
+
+    _assert_error(path, "is a KMZ archive without a .kml file inside")
+
+
+def test_kmz_with_malformed_kml_names_the_member(tmp_path: Path) -> None:
+    kml = (BAD / "kml_malformed.kml").read_bytes()
+    path = _kmz(tmp_path / "targets.kmz", {"doc.kml": kml})
+
+    _assert_error(path, "targets.kmz!doc.kml' is not well-formed XML")
+
+
+def test_csv_not_utf8(tmp_path: Path) -> None:
+    path = tmp_path / "csv_not_utf8.csv"
+    path.write_bytes("name,lat,lon\nZürich,47.3769,8.5417\n".encode("latin-1"))
+
+    _assert_error(path, "is not UTF-8 text")
+
+
+def test_geojson_deep_nesting(tmp_path: Path) -> None:
+    path = tmp_path / "deep.geojson"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+
+    _assert_error(path, "JSON")
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    _assert_error(tmp_path / "nowhere.kml", "does not exist")
+
+
+def test_folder_instead_of_file(tmp_path: Path) -> None:
+    path = tmp_path / "folder.kml"
+    path.mkdir()
+
+    _assert_error(path, "is a folder")
+
+
+def test_name_with_newline_keeps_message_on_one_line(tmp_path: Path) -> None:
+    path = tmp_path / "points.csv"
+    path.write_text('name,lat,lon\n"Roof\nnorth",95,8.5\n')
+
+    _assert_error(path, "point 'Roof\\nnorth' (row 3) with latitude 95.0")
+
+
+# --- fuzzing -------------------------------------------------------------------------------
+
+SUFFIXES = [".kml", ".kmz", ".geojson", ".json", ".csv"]
+SEEDS = {
+    ".kml": (TARGETS / "nested_folders.kml").read_bytes(),
+    ".kmz": (TARGETS / "nested_folders.kml").read_bytes(),
+    ".geojson": (TARGETS / "points.geojson").read_bytes(),
+    ".json": (TARGETS / "points.geojson").read_bytes(),
+    ".csv": (TARGETS / "points.csv").read_bytes(),
+}
+
+
+@st.composite
+def _contents(draw: st.DrawFn) -> tuple[str, bytes]:
+    suffix = draw(st.sampled_from(SUFFIXES))
+    noise = st.binary(max_size=300) | st.text(max_size=300).map(str.encode)
+    if draw(st.booleans()):
+        return suffix, draw(noise)
+    seed = SEEDS[suffix]  # splice noise into a valid file to get past the parsers
+    start = draw(st.integers(0, len(seed)))
+    end = draw(st.integers(start, min(len(seed), start + 40)))
+    return suffix, seed[:start] + draw(noise) + seed[end:]
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=_contents())
+def test_fuzz_returns_targets_or_raises_targets_error(
+    tmp_path_factory: pytest.TempPathFactory, case: tuple[str, bytes]
+) -> None:
+    suffix, data = case
+    path = tmp_path_factory.mktemp("fuzz") / f"fuzz{suffix}"
+    if suffix == ".kmz" and data[:1] == b"<":
+        _kmz(path, {"doc.kml": data})
+    else:
+        path.write_bytes(data)
+
+    try:
+        result = read_targets(path)
+    except TargetsError as exc:
+        assert len(str(exc).splitlines()) == 1
+        assert str(path) in str(exc)
+    else:
+        assert result.targets
+        assert result.source == str(path)
