@@ -157,7 +157,8 @@ def plan_command(
                 hover_speed_m_s=speed,
             ),
         )
-        progress = None if (quiet or as_json) else (lambda msg: click.echo(f"... {msg}", err=True))
+        interactive = sys.stderr.isatty() and not (quiet or as_json)
+        progress = (lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None
         result = plan(Path(dem), Path(targets), settings, progress=progress)
         data = write_products(result, Path(out))
     except UrptError as exc:
