@@ -98,7 +98,7 @@ def _valid_targets(
     pick = rng.choice(len(rows), size=count, replace=False)
     out = []
     for n, i in enumerate(pick, start=1):
-        x, y = transform * (cols[i] + 0.5, rows[i] + 0.5)
+        x, y = transform @ (cols[i] + 0.5, rows[i] + 0.5)
         lon, lat = to_geo.transform(x, y)
         out.append((f"T{n}", float(lat), float(lon)))
     return out

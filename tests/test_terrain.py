@@ -128,7 +128,7 @@ def test_geographic_dem_is_georeferenced_in_utm_without_resampling(name: str) ->
     col0, row0, width, height = terrain.read_window_px
     cols = rng.integers(col0 + 2, col0 + width - 2, 50)
     rows = rng.integers(row0 + 2, row0 + height - 2, 50)
-    lon, lat = transform * (cols + 0.5, rows + 0.5)
+    lon, lat = transform @ (cols + 0.5, rows + 0.5)
     x, y = to_utm.transform(lon, lat)
     got = terrain.sample(np.asarray(x), np.asarray(y))
     want = full[rows, cols]
@@ -145,7 +145,7 @@ def test_geographic_dem_is_georeferenced_in_utm_without_resampling(name: str) ->
 
 def test_rotated_raster_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "rot.tif"
-    rotated = rasterio.Affine.rotation(10) * from_origin(ORIGIN[0], ORIGIN[1], 1.0, 1.0)
+    rotated = rasterio.Affine.rotation(10) @ from_origin(ORIGIN[0], ORIGIN[1], 1.0, 1.0)
     with rasterio.open(
         path,
         "w",
