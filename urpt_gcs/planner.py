@@ -126,7 +126,7 @@ class Plan:
 
     @property
     def altitude_rel_m(self) -> float:
-        return self.camera.altitude_m - self.home_ground_m
+        return self.mission.altitude_rel_m
 
 
 Progress = Callable[[str], None]
@@ -337,14 +337,17 @@ def plan(
             )
     lap("checks")
 
-    home = GeoPoint(home_lat, home_lon, home_ground)
+    home = GeoPoint(home_lat, home_lon, round(home_ground, 2))
+    # Centimetre altitudes, rounded up: a higher eye only widens the cone and lifts every
+    # line of sight, so nothing checked above is lost.
+    altitude_rel = math.ceil((altitude - home_ground) * 100.0) / 100.0
     mission = build_mission(
         home,
         _latlon(crs, instance.viewpoints_xy[list(tour.order)]),
-        altitude - home_ground,
+        altitude_rel,
         settings.mission,
     )
-    flight_time = _flight_time(settings, tour, altitude - home_ground)
+    flight_time = _flight_time(settings, tour, altitude_rel)
     lap("mission")
     return Plan(
         settings=settings,

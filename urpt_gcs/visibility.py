@@ -31,7 +31,7 @@ from urpt_gcs.terrain import FloatArray, Terrain
 BoolArray = npt.NDArray[np.bool_]
 
 # Samples per ray-sweep chunk (targets x azimuths x steps), to bound memory.
-_CHUNK_SAMPLES = 4_000_000
+_CHUNK_SAMPLES = 1_000_000
 
 
 @dataclass(frozen=True, slots=True)

@@ -32,12 +32,8 @@ class RoutingSolver:
         cost = np.rint(instance.distance_m[nodes + 1][:, nodes + 1] * _SCALE).astype(np.int64)
         manager = pywrapcp.RoutingIndexManager(len(nodes), 1, 0)
         routing = pywrapcp.RoutingModel(manager)
-        flat = cost.tolist()
-
-        def arc_cost(i: int, j: int) -> int:
-            return int(flat[manager.IndexToNode(i)][manager.IndexToNode(j)])
-
-        callback = routing.RegisterTransitCallback(arc_cost)
+        # A matrix callback stays in C++; a Python callback would be called millions of times.
+        callback = routing.RegisterTransitMatrix(cost.tolist())
         routing.SetArcCostEvaluatorOfAllVehicles(callback)
         for t in range(instance.n_targets):
             members = (np.flatnonzero(tg == t) + 1).tolist()

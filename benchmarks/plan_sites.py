@@ -1,0 +1,60 @@
+"""Benchmark: plan the demo site and the real rasters beside the checkout; print timings.
+
+    .venv/bin/python benchmarks/plan_sites.py [--time-limit S]
+
+Targets on the real rasters are placed deterministically on valid ground (same rule as the
+tests). Reports wall time per stage, visibility time per target, tour length and bound.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "tests"))
+
+from test_plan import REAL_CASES, _valid_targets  # noqa: E402
+
+from urpt_gcs.planner import PlanSettings, plan  # noqa: E402
+from urpt_gcs.solvers import SolveSettings  # noqa: E402
+
+
+def run(name: str, dem: Path, targets: Path, settings: PlanSettings) -> None:
+    started = time.perf_counter()
+    result = plan(dem, targets, settings)
+    wall = time.perf_counter() - started
+    t = result.timings_s
+    m = len(result.targets.targets)
+    print(
+        f"{name:36s} targets {m:3d}  viewpoints {result.instance.n_viewpoints:5d}  "
+        f"visibility {1000 * t['visibility'] / m:6.2f} ms/target  "
+        f"cover sets {t['viewpoints']:6.3f} s  solve {t['solve']:6.2f} s  "
+        f"tour {result.tour.length_m:8.1f} m  bound {result.tour.lower_bound_m:8.1f} m  "
+        f"proven {result.tour.proven_optimal!s:5s}  wall {wall:6.2f} s"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--time-limit", type=float, default=5.0)
+    args = parser.parse_args()
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=args.time_limit))
+    run("demo", REPO / "missions/demo/site.tif", REPO / "missions/demo/targets.kml", settings)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, count, box in REAL_CASES:
+            dem = REPO.parent / "shared" / "dem" / name
+            pts = _valid_targets(dem, count, seed=3, box_m=box)
+            csv = Path(tmp) / f"{name}.csv"
+            csv.write_text("name,lat,lon\n" + "".join(f"{n},{a:.9f},{b:.9f}\n" for n, a, b in pts))
+            run(name, dem, csv, settings)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak RSS {peak:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
