@@ -10,7 +10,8 @@ further in until it does, or dropped. The nadir point always sees its target.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -42,29 +43,44 @@ class Geometry:
         return cone
 
 
+Oracle = Callable[[FloatArray], BoolArray]
+
+
 @dataclass(frozen=True, slots=True)
 class Instance:
-    """A GTSP with cover sets.
+    """A generalized TSP with cover sets: visit viewpoints so that every target is seen.
 
-    ``covers[v, t]`` says viewpoint ``v`` sees target ``t``. ``owner[v]`` is the target whose
-    region ``v`` was sampled from. ``distance_m`` is (n + 1) x (n + 1): index 0 is the depot
-    (home), index ``v + 1`` viewpoint ``v``. Distances are horizontal: the climb at home and
-    the descent are the same for every tour.
+    ``covers[v, t]`` says viewpoint ``v`` sees target ``t`` (a GTSPLIB cluster is a target
+    whose viewpoints are its nodes). ``distance[u, v]`` is the cost of flying from ``u`` to
+    ``v`` (asymmetric allowed). With a depot, every tour starts and ends there:
+    ``depot_distance[0, v]`` is depot -> ``v`` and ``depot_distance[1, v]`` is ``v`` -> depot;
+    without one, a tour is a closed cycle through its viewpoints.
+
+    Planning instances also carry the viewpoints' positions, the target geometry (for
+    geometric bounds) and an ``oracle`` that says what any point of the flight plane sees, so
+    a solver that places viewpoints of its own can have each one checked on the terrain.
     """
 
-    viewpoints_xy: FloatArray
     covers: BoolArray
-    owner: IntArray
-    depot_xy: tuple[float, float]
-    distance_m: FloatArray
+    distance: FloatArray
+    depot_distance: FloatArray | None = None
+    points_xy: FloatArray | None = None
+    depot_xy: tuple[float, float] | None = None
+    owner: IntArray | None = None
     geometry: Geometry | None = None
+    oracle: Oracle | None = field(default=None, repr=False, compare=False)
+    name: str = ""
 
     def __post_init__(self) -> None:
         n, _m = self.covers.shape
-        if self.viewpoints_xy.shape != (n, 2) or self.owner.shape != (n,):
-            raise ValueError("Instance arrays disagree on the number of viewpoints")
-        if self.distance_m.shape != (n + 1, n + 1):
-            raise ValueError("Instance.distance_m must be (n + 1) x (n + 1)")
+        if self.distance.shape != (n, n):
+            raise ValueError("Instance.distance must be n x n for n viewpoints")
+        if self.depot_distance is not None and self.depot_distance.shape != (2, n):
+            raise ValueError("Instance.depot_distance must be 2 x n")
+        if self.points_xy is not None and self.points_xy.shape != (n, 2):
+            raise ValueError("Instance.points_xy must be n x 2")
+        if self.owner is not None and self.owner.shape != (n,):
+            raise ValueError("Instance.owner must have one entry per viewpoint")
         missing = np.flatnonzero(~self.covers.any(axis=0))
         if missing.size:
             raise ValueError(f"targets {missing.tolist()} are seen by no viewpoint")
@@ -77,10 +93,19 @@ class Instance:
     def n_targets(self) -> int:
         return int(self.covers.shape[1])
 
+    @property
+    def has_depot(self) -> bool:
+        return self.depot_distance is not None
+
     def tour_length(self, order: npt.ArrayLike) -> float:
-        """Length of the closed tour depot -> viewpoints in ``order`` -> depot."""
-        nodes = np.concatenate([[0], np.asarray(order, dtype=np.int64) + 1, [0]])
-        return float(self.distance_m[nodes[:-1], nodes[1:]].sum())
+        """Length of the closed tour through viewpoints ``order`` (and the depot, if any)."""
+        idx = np.asarray(order, dtype=np.int64)
+        if idx.size == 0:
+            return 0.0
+        inner = float(self.distance[idx[:-1], idx[1:]].sum())
+        if self.depot_distance is not None:
+            return inner + float(self.depot_distance[0, idx[0]] + self.depot_distance[1, idx[-1]])
+        return inner + float(self.distance[idx[-1], idx[0]])
 
     def uncovered(self, order: npt.ArrayLike) -> list[int]:
         """Targets that no viewpoint in ``order`` sees."""
@@ -158,13 +183,19 @@ def build_instance(
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
     covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera)
-    all_xy = np.vstack([np.asarray(depot_xy, dtype=np.float64)[None, :], viewpoints])
+    depot = np.asarray(depot_xy, dtype=np.float64)
+    to_depot = np.hypot(viewpoints[:, 0] - depot[0], viewpoints[:, 1] - depot[1])
+
+    def oracle(points_xy: FloatArray) -> BoolArray:
+        return cover_sets(terrain, np.asarray(points_xy, dtype=np.float64), nadir, ground_m, camera)
+
     return Instance(
-        viewpoints_xy=viewpoints,
         covers=covers,
+        distance=euclidean_matrix(viewpoints),
+        depot_distance=np.vstack([to_depot, to_depot]),
+        points_xy=viewpoints,
+        depot_xy=(float(depot[0]), float(depot[1])),
         owner=owner,
-        depot_xy=(float(depot_xy[0]), float(depot_xy[1])),
-        distance_m=euclidean_matrix(all_xy),
         geometry=Geometry(
             targets_xy=nadir,
             ground_m=np.asarray(ground_m, dtype=np.float64),
@@ -172,4 +203,5 @@ def build_instance(
             fov_deg=camera.fov_deg,
             terrain_max_m=terrain_max_m,
         ),
+        oracle=oracle,
     )

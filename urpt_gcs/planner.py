@@ -31,7 +31,7 @@ from urpt_gcs.terrain import (
     planning_crs,
     read_terrain,
 )
-from urpt_gcs.visibility import Camera, Region, visibility_regions
+from urpt_gcs.visibility import BoolArray, Camera, Region, visibility_regions
 
 # Extra DEM read around the operating area, in cells, so bilinear samples at its edge exist.
 _WINDOW_MARGIN_CELLS = 4
@@ -320,8 +320,10 @@ def plan(
     tour = solve(instance, settings.solver, settings.solve)
     lap("solve")
 
-    stops = np.vstack([[home_xy], instance.viewpoints_xy[list(tour.order)], [home_xy]])
-    stop_names = ["home", *(_viewpoint_name(instance, v, names) for v in tour.order), "home"]
+    if tour.points_xy is None:
+        raise PlanError(f"internal check failed: solver {tour.solver} returned no positions")
+    stops = np.vstack([[home_xy], tour.points_xy, [home_xy]])
+    stop_names = ["home", *(_stop_name(row, names) for row in tour.sees), "home"]
     legs = _legs(terrain, stops, stop_names, altitude)
     for number, leg in enumerate(legs, start=1):
         if math.isfinite(leg.min_clearance_m) and leg.min_clearance_m < settings.min_clearance_m:
@@ -343,7 +345,7 @@ def plan(
     altitude_rel = math.ceil((altitude - home_ground) * 100.0) / 100.0
     mission = build_mission(
         home,
-        _latlon(crs, instance.viewpoints_xy[list(tour.order)]),
+        _latlon(crs, tour.points_xy),
         altitude_rel,
         settings.mission,
     )
@@ -373,9 +375,8 @@ def plan(
     )
 
 
-def _viewpoint_name(instance: Instance, v: int, names: list[str]) -> str:
-    seen = np.flatnonzero(instance.covers[v]).tolist()
-    return "viewpoint for " + "+".join(names[t] for t in seen)
+def _stop_name(sees: BoolArray, names: list[str]) -> str:
+    return "viewpoint for " + "+".join(names[t] for t in np.flatnonzero(sees).tolist())
 
 
 def _latlon(crs: pyproj.CRS, xy: FloatArray) -> list[tuple[float, float]]:
@@ -390,7 +391,7 @@ def _flight_time(settings: PlanSettings, tour: Tour, altitude_rel_m: float) -> f
     stops = len(tour.order)
     return (
         altitude_rel_m / settings.climb_m_s
-        + tour.length_m / speed
+        + tour.length / speed
         + stops * (settings.mission.hold_s + speed / settings.accel_m_s2)
         + altitude_rel_m / settings.descent_m_s
     )

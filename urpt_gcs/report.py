@@ -21,14 +21,16 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
     names = [t.name for t in plan.targets.targets]
     stops = []
     previous = np.asarray(plan.home_xy)
-    for k, (v, item) in enumerate(zip(tour.order, _waypoint_items(plan), strict=True), start=1):
-        xy = inst.viewpoints_xy[v]
+    assert tour.points_xy is not None
+    for k, (xy, sees, item) in enumerate(
+        zip(tour.points_xy, tour.sees, _waypoint_items(plan), strict=True), start=1
+    ):
         stops.append(
             {
                 "order": k,
                 "lat_deg": item[0],
                 "lon_deg": item[1],
-                "sees": [names[t] for t in np.flatnonzero(inst.covers[v]).tolist()],
+                "sees": [names[t] for t in np.flatnonzero(sees).tolist()],
                 "from_previous_m": round(float(np.hypot(*(xy - previous))), 2),
             }
         )
@@ -38,8 +40,8 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "target_names": names,
         "viewpoints": inst.n_viewpoints,
         "tour_stops": len(tour.order),
-        "tour_length_m": round(tour.length_m, 3),
-        "lower_bound_m": round(tour.lower_bound_m, 3),
+        "tour_length_m": round(tour.length, 3),
+        "lower_bound_m": round(tour.lower_bound, 3),
         "gap_pct": _round(100.0 * tour.gap, 2),
         "proven_optimal": tour.proven_optimal,
         "solver": tour.solver,

@@ -11,6 +11,7 @@ import numpy as np
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.gtsp import Instance
 from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility import BoolArray
 
 # Tekdas et al.: a tour through k disjoint discs of radius r is at least k/2 * alpha * r (k >= 3).
 DISC_PACKING_ALPHA = 0.4786
@@ -32,20 +33,24 @@ class SolveSettings:
 
 @dataclass(frozen=True, slots=True)
 class Tour:
-    """A closed tour from the depot through viewpoints and back.
+    """A closed tour through viewpoints (from the depot and back, if the instance has one).
 
-    ``order`` lists viewpoint indices in flight order (the depot is implicit at both ends).
-    ``lower_bound_m`` is a proven lower bound on the length of any tour that sees every
-    target from the flight plane; ``proven_optimal`` says the tour is optimal for the
-    instance (its discretised viewpoints).
+    ``order`` lists the instance viewpoints in flight order; a stop the solver placed itself
+    (not an instance viewpoint) is ``-1`` there. ``points_xy`` are the stops' positions
+    (None for an instance without coordinates) and ``sees[k, t]`` says stop ``k`` sees target
+    ``t``, checked on the terrain for placed stops. ``lower_bound`` is a proven lower bound on
+    any tour that sees every target (for a planning instance: from anywhere on the flight
+    plane); ``proven_optimal`` says no tour over the instance's viewpoints is shorter.
     """
 
     order: tuple[int, ...]
-    length_m: float
-    lower_bound_m: float
+    length: float
+    lower_bound: float
     proven_optimal: bool
     solver: str
     solve_s: float
+    points_xy: FloatArray | None
+    sees: BoolArray
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -53,9 +58,9 @@ class Tour:
         """How much longer the tour may be than the best possible: (L - LB) / LB."""
         if self.proven_optimal:
             return 0.0
-        if self.lower_bound_m <= 0.0:
+        if self.lower_bound <= 0.0:
             return math.inf
-        return max(self.length_m - self.lower_bound_m, 0.0) / self.lower_bound_m
+        return max(self.length - self.lower_bound, 0.0) / self.lower_bound
 
 
 class Solver(Protocol):
@@ -105,15 +110,16 @@ def geometric_lower_bound(instance: Instance) -> float:
     if g is None:
         return 0.0
     cone = g.cone_radius_m
-    return max(
-        disc_packing_bound(g.targets_xy, cone), depot_bound(instance.depot_xy, g.targets_xy, cone)
-    )
+    bound = disc_packing_bound(g.targets_xy, cone)
+    if instance.depot_xy is not None:
+        bound = max(bound, depot_bound(instance.depot_xy, g.targets_xy, cone))
+    return bound
 
 
 def finish_tour(
     instance: Instance,
     order: list[int],
-    lower_bound_m: float,
+    lower_bound: float,
     solver: str,
     solve_s: float,
     proven: bool = False,
@@ -129,18 +135,21 @@ def finish_tour(
             f"{missing}; try another --solver and report this"
         )
     length = instance.tour_length(unique)
-    if lower_bound_m > length * (1.0 + 1e-9) + 1e-6:
+    if lower_bound > length * (1.0 + 1e-9) + 1e-6:
         raise PlanError(
-            f"internal check failed: lower bound {lower_bound_m:.3f} m exceeds the tour "
-            f"({length:.3f} m) from solver {solver}; report this"
+            f"internal check failed: lower bound {lower_bound:.3f} exceeds the tour "
+            f"({length:.3f}) from solver {solver}; report this"
         )
-    bound = min(lower_bound_m, length)
+    bound = min(lower_bound, length)
+    idx = np.asarray(unique, dtype=np.int64)
     return Tour(
         order=tuple(unique),
-        length_m=length,
-        lower_bound_m=bound,
+        length=length,
+        lower_bound=bound,
         proven_optimal=proven or length <= bound * (1.0 + 1e-9),
         solver=solver,
         solve_s=solve_s,
+        points_xy=None if instance.points_xy is None else instance.points_xy[idx],
+        sees=instance.covers[idx],
         notes=notes,
     )
