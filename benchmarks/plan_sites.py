@@ -34,7 +34,7 @@ def run(name: str, dem: Path, targets: Path, settings: PlanSettings) -> None:
         f"{name:36s} targets {m:3d}  viewpoints {result.instance.n_viewpoints:5d}  "
         f"visibility {1000 * t['visibility'] / m:6.2f} ms/target  "
         f"cover sets {t['viewpoints']:6.3f} s  solve {t['solve']:6.2f} s  "
-        f"tour {result.tour.length_m:8.1f} m  bound {result.tour.lower_bound_m:8.1f} m  "
+        f"tour {result.tour.length:8.1f} m  bound {result.tour.lower_bound:8.1f} m  "
         f"proven {result.tour.proven_optimal!s:5s}  wall {wall:6.2f} s"
     )
 

@@ -84,6 +84,10 @@ class Instance:
         missing = np.flatnonzero(~self.covers.any(axis=0))
         if missing.size:
             raise ValueError(f"targets {missing.tolist()} are seen by no viewpoint")
+        # Solvers share these arrays; none may change them.
+        for array in (self.covers, self.distance, self.depot_distance, self.points_xy, self.owner):
+            if array is not None:
+                array.setflags(write=False)
 
     @property
     def n_viewpoints(self) -> int:

@@ -96,7 +96,7 @@ def _minutes(seconds: float) -> str:
 def summary_text(data: dict[str, Any]) -> str:
     """One screen of text from :func:`summary`'s dictionary."""
     if data["proven_optimal"]:
-        quality = "proven optimal"
+        quality = f"proven optimal over the {data['viewpoints']} candidate viewpoints"
     elif data["gap_pct"] is None:
         quality = "no lower bound available"
     else:

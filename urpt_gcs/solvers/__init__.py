@@ -1,25 +1,42 @@
-"""Solvers for the viewpoint GTSP, all behind one interface: ``Instance -> Tour``."""
+"""Solvers for the viewpoint GTSP, all behind one interface: ``Instance -> Tour``.
+
+- ``exact``: dynamic programming over covered-target subsets; proves optimality.
+- ``ortools``: OR-Tools routing with guided local search (a baseline).
+- ``auto``: ``exact`` when its estimated work fits the budget, else the best heuristic.
+"""
 
 from __future__ import annotations
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance
 from urpt_gcs.solvers.base import Solver, SolveSettings, Tour
+from urpt_gcs.solvers.exact import ExactSolver, exact_work
 from urpt_gcs.solvers.routing import RoutingSolver
 
-SOLVERS: dict[str, type[Solver]] = {"ortools": RoutingSolver}
+SOLVERS: dict[str, type[Solver]] = {
+    "exact": ExactSolver,
+    "ortools": RoutingSolver,
+}
 SOLVER_CHOICES = ("auto", *SOLVERS)
+# Heuristics in order of preference for `auto` when the exact solver would take too long.
+_FALLBACKS = ("heuristic", "ortools")
 
-__all__ = ["SOLVERS", "SOLVER_CHOICES", "SolveSettings", "Solver", "Tour", "solve"]
+__all__ = ["SOLVERS", "SOLVER_CHOICES", "SolveSettings", "Solver", "Tour", "choose", "solve"]
+
+
+def choose(instance: Instance, name: str = "auto") -> str:
+    """The solver ``name`` stands for on ``instance``."""
+    if name != "auto":
+        if name not in SOLVERS:
+            raise SettingsError(
+                f"--solver {name!r} is not known: use one of {', '.join(SOLVER_CHOICES)}"
+            )
+        return name
+    if exact_work(instance).fits_budget:
+        return "exact"
+    return next(s for s in _FALLBACKS if s in SOLVERS)
 
 
 def solve(instance: Instance, name: str = "auto", settings: SolveSettings | None = None) -> Tour:
-    """Solve ``instance`` with the named solver; ``auto`` picks the best available."""
-    settings = settings or SolveSettings()
-    if name == "auto":
-        name = "ortools"
-    if name not in SOLVERS:
-        raise SettingsError(
-            f"--solver {name!r} is not known: use one of {', '.join(SOLVER_CHOICES)}"
-        )
-    return SOLVERS[name]().solve(instance, settings)
+    """Solve ``instance`` with the named solver; ``auto`` picks by :func:`choose`."""
+    return SOLVERS[choose(instance, name)]().solve(instance, settings or SolveSettings())

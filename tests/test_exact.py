@@ -1,0 +1,76 @@
+"""The exact solver against brute-force enumeration on small random instances."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.solvers import SolveSettings, choose, solve
+from urpt_gcs.solvers.exact import exact_work
+
+
+def _random_instance(
+    seed: int, n: int, m: int, depot: bool, asymmetric: bool = False, overlap: float = 0.3
+) -> Instance:
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(0, 100, (n, 2))
+    covers = np.zeros((n, m), dtype=bool)
+    covers[np.arange(n), rng.integers(0, m, n)] = True
+    covers[np.arange(m) % n, np.arange(m)] = True  # every target seen
+    covers |= rng.random((n, m)) < overlap  # overlapping cover sets
+    dist = euclidean_matrix(pts)
+    if asymmetric:
+        dist = dist + rng.uniform(0, 20, (n, n))
+        np.fill_diagonal(dist, 0.0)
+    depot_distance = None
+    if depot:
+        home = rng.uniform(0, 100, 2)
+        d = np.hypot(pts[:, 0] - home[0], pts[:, 1] - home[1])
+        depot_distance = np.vstack([d, d + (rng.uniform(0, 5, n) if asymmetric else 0)])
+    return Instance(covers=covers, distance=dist, depot_distance=depot_distance, points_xy=pts)
+
+
+def _brute_force(inst: Instance) -> float:
+    """Shortest closed tour over every ordered subset of viewpoints that sees every target."""
+    n = inst.n_viewpoints
+    best = math.inf
+    for k in range(1, n + 1):
+        for subset in itertools.combinations(range(n), k):
+            if not inst.covers[list(subset)].any(axis=0).all():
+                continue
+            for perm in itertools.permutations(subset):
+                if not inst.has_depot and perm[0] != subset[0]:
+                    continue  # a cycle: fix its first element
+                best = min(best, inst.tour_length(perm))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("depot", [True, False])
+def test_exact_equals_brute_force(seed: int, depot: bool) -> None:
+    inst = _random_instance(seed, n=7, m=4, depot=depot, overlap=0.25)
+    tour = solve(inst, "exact")
+    assert tour.proven_optimal
+    assert inst.uncovered(list(tour.order)) == []
+    assert tour.length == pytest.approx(_brute_force(inst), rel=1e-9)
+    assert tour.length == pytest.approx(inst.tour_length(list(tour.order)), rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_exact_equals_brute_force_asymmetric(seed: int) -> None:
+    inst = _random_instance(100 + seed, n=7, m=3, depot=seed % 2 == 0, asymmetric=True, overlap=0.0)
+    tour = solve(inst, "exact")
+    assert tour.length == pytest.approx(_brute_force(inst), rel=1e-9)
+
+
+def test_auto_picks_exact_when_it_fits() -> None:
+    small = _random_instance(1, n=60, m=8, depot=True)
+    assert exact_work(small).fits_budget
+    assert choose(small) == "exact"
+    tour = solve(small, "auto", SolveSettings(time_limit_s=1.0))
+    other = solve(small, "ortools", SolveSettings(time_limit_s=1.0))
+    assert tour.proven_optimal and tour.length <= other.length + 1e-9
