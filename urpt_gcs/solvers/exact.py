@@ -50,7 +50,8 @@ class ExactWork:
 
 def _masks(instance: Instance) -> npt.NDArray[np.int64]:
     weights = np.left_shift(np.int64(1), np.arange(instance.n_targets, dtype=np.int64))
-    return (instance.covers.astype(np.int64) * weights).sum(axis=1)
+    masks: npt.NDArray[np.int64] = (instance.covers.astype(np.int64) * weights).sum(axis=1)
+    return masks
 
 
 def _starts(instance: Instance) -> npt.NDArray[np.int64]:
@@ -73,7 +74,7 @@ def exact_work(instance: Instance) -> ExactWork:
     return ExactWork(per_start * starts, float(2**m) * n * 20.0, starts)
 
 
-@numba.njit(cache=True)  # type: ignore[misc]
+@numba.njit(cache=True)
 def _held_karp(
     cover: npt.NDArray[np.int64],
     dist: npt.NDArray[np.float64],
@@ -146,10 +147,10 @@ def _walk_back(
     return order[::-1]
 
 
-@numba.njit(cache=True)  # type: ignore[misc]
+@numba.njit(cache=True)
 def _shortest_paths(dist: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """All-pairs shortest paths (Floyd–Warshall); equals ``dist`` for metric distances."""
-    out = dist.copy()
+    out: npt.NDArray[np.float64] = dist.copy()
     n = out.shape[0]
     for k in range(n):
         for i in range(n):
