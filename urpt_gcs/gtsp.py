@@ -161,7 +161,7 @@ def build_instance(
     targets_xy: FloatArray,
     ground_m: FloatArray,
     camera: Camera,
-    depot_xy: tuple[float, float],
+    depot_xy: tuple[float, float] | None,
     terrain_max_m: float,
 ) -> Instance:
     """Candidate viewpoints with verified cover sets, and the distance matrix."""
@@ -187,8 +187,12 @@ def build_instance(
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
     covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera)
-    depot = np.asarray(depot_xy, dtype=np.float64)
-    to_depot = np.hypot(viewpoints[:, 0] - depot[0], viewpoints[:, 1] - depot[1])
+    depot_distance = None
+    if depot_xy is not None:
+        depot = np.asarray(depot_xy, dtype=np.float64)
+        to_depot = np.hypot(viewpoints[:, 0] - depot[0], viewpoints[:, 1] - depot[1])
+        depot_distance = np.vstack([to_depot, to_depot])
+        depot_xy = (float(depot[0]), float(depot[1]))
 
     def oracle(points_xy: FloatArray) -> BoolArray:
         return cover_sets(terrain, np.asarray(points_xy, dtype=np.float64), nadir, ground_m, camera)
@@ -196,9 +200,9 @@ def build_instance(
     return Instance(
         covers=covers,
         distance=euclidean_matrix(viewpoints),
-        depot_distance=np.vstack([to_depot, to_depot]),
+        depot_distance=depot_distance,
         points_xy=viewpoints,
-        depot_xy=(float(depot[0]), float(depot[1])),
+        depot_xy=depot_xy,
         owner=owner,
         geometry=Geometry(
             targets_xy=nadir,

@@ -153,3 +153,52 @@ def finish_tour(
         sees=instance.covers[idx],
         notes=notes,
     )
+
+
+def finish_placed_tour(
+    instance: Instance,
+    points_xy: FloatArray,
+    lower_bound: float,
+    solver: str,
+    solve_s: float,
+    notes: tuple[str, ...] = (),
+) -> Tour:
+    """A tour through stops the solver placed itself, each re-checked on the terrain.
+
+    What every stop sees comes from the instance's oracle (line of sight on the DEM inside
+    the camera cone), not from the solver; the length is measured on the plane.
+    """
+    if instance.oracle is None:
+        raise PlanError(f"solver {solver} places its own viewpoints and needs the terrain")
+    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    sees = instance.oracle(pts)
+    missing = (
+        np.flatnonzero(~sees.any(axis=0)).tolist() if len(pts) else list(range(instance.n_targets))
+    )
+    if missing:
+        raise PlanError(
+            f"internal check failed: solver {solver} returned a tour that misses targets "
+            f"{missing}; try another --solver and report this"
+        )
+    legs = np.hypot(*np.diff(pts, axis=0).T).sum() if len(pts) > 1 else 0.0
+    if instance.depot_xy is not None:
+        depot = np.asarray(instance.depot_xy)
+        length = float(legs + np.hypot(*(pts[0] - depot)) + np.hypot(*(pts[-1] - depot)))
+    else:
+        length = float(legs + np.hypot(*(pts[-1] - pts[0])))
+    if lower_bound > length * (1.0 + 1e-9) + 1e-6:
+        raise PlanError(
+            f"internal check failed: lower bound {lower_bound:.3f} exceeds the tour "
+            f"({length:.3f}) from solver {solver}; report this"
+        )
+    return Tour(
+        order=(-1,) * len(pts),
+        length=length,
+        lower_bound=min(lower_bound, length),
+        proven_optimal=False,
+        solver=solver,
+        solve_s=solve_s,
+        points_xy=pts,
+        sees=sees,
+        notes=notes,
+    )
