@@ -116,6 +116,13 @@ def main() -> None:
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", is_flag=True, help="Print nothing but errors.")
+@click.option(
+    "--export-gtsp",
+    "export_gtsp",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the planning instance as a GTSPLIB file (EUC_2D, centimetres).",
+)
 def plan_command(
     dem: str,
     targets: str,
@@ -134,6 +141,7 @@ def plan_command(
     seed: int,
     as_json: bool,
     quiet: bool,
+    export_gtsp: Path | None,
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
     from urpt_gcs.planner import plan
@@ -161,6 +169,12 @@ def plan_command(
         progress = (lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None
         result = plan(Path(dem), Path(targets), settings, progress=progress)
         data = write_products(result, Path(out))
+        if export_gtsp is not None:
+            from urpt_gcs.formats.gtsplib import export_gtsplib
+
+            export_gtsplib(
+                result.instance, export_gtsp, comment=f"urpt-gcs plan of {Path(targets).name}"
+            )
     except UrptError as exc:
         _fail(exc)
         return
@@ -189,3 +203,88 @@ def demo_site_command(out: str, seed: int) -> None:
         _fail(exc)
         return
     click.echo(f"wrote {site.dsm_path} and {site.targets_path}")
+
+
+@main.group("bench")
+def bench_group() -> None:
+    """Benchmarks: the solvers on published instance sets, beside published results."""
+
+
+@bench_group.command("gtsplib")
+@click.argument("directory", type=click.Path(path_type=Path))
+@click.option(
+    "--time-limit",
+    type=float,
+    default=None,
+    help="Seconds per solve [default: 3x GLNS's published mean time, else 10].",
+)
+@click.option("--runs", type=int, default=1, show_default=True, help="Runs (seeds) per solver.")
+@click.option("--only", default=None, metavar="NAME[,NAME]", help="Run only these instances.")
+@click.option(
+    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
+)
+@click.option(
+    "--solver",
+    default=None,
+    metavar="NAME[,NAME]",
+    help="Solver(s) to compare [default: heuristic]; OR-Tools always runs as the baseline.",
+)
+def bench_gtsplib_command(
+    directory: Path,
+    time_limit: float | None,
+    runs: int,
+    only: str | None,
+    out: Path | None,
+    solver: str | None,
+) -> None:
+    """Solve GTSPLIB files in DIRECTORY; compare with best_known.csv and glns_default.csv."""
+    from urpt_gcs.bench.gtsplib import format_table, run_gtsplib
+
+    def names(text: str | None) -> list[str]:
+        return [part.strip() for part in (text or "").split(",") if part.strip()]
+
+    interactive = sys.stderr.isatty()
+    try:
+        rows = run_gtsplib(
+            directory,
+            solvers=names(solver),
+            time_limit_s=time_limit,
+            runs=runs,
+            only=names(only) or None,
+            out_dir=out,
+            progress=(lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None,
+        )
+    except UrptError as exc:
+        _fail(exc)
+        return
+    click.echo(format_table(rows))
+
+
+@bench_group.command("paper")
+@click.option("--quick", is_flag=True, help="A small subset of the study (what CI runs).")
+@click.option(
+    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
+)
+@click.option(
+    "--heuristic-time",
+    type=float,
+    default=1.0,
+    show_default=True,
+    help="Seconds the heuristic gets per instance.",
+)
+def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) -> None:
+    """Reproduce the paper's simulation study: 540 instances on random TIN terrains."""
+    from urpt_gcs.bench.paper import format_tables, run_paper
+
+    interactive = sys.stderr.isatty()
+    try:
+        rows = run_paper(
+            quick=quick,
+            out_dir=out,
+            heuristic_s=heuristic_time,
+            progress=(lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None,
+        )
+    except UrptError as exc:
+        _fail(exc)
+        return
+    click.echo(format_tables(rows))

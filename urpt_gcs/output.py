@@ -27,6 +27,9 @@ def write_all(out_dir: Path, files: Mapping[str, str | bytes]) -> list[Path]:
     if not out_dir.is_dir():
         raise OutputError(f"output '{out_dir}' is not a folder: choose another --out")
     temps: list[tuple[Path, Path]] = []
+    # mkstemp creates 0600 files; outputs are ordinary files, readable as the umask allows.
+    umask = os.umask(0)
+    os.umask(umask)
     try:
         for name, content in files.items():
             fd, tmp_name = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=out_dir)
@@ -34,6 +37,7 @@ def write_all(out_dir: Path, files: Mapping[str, str | bytes]) -> list[Path]:
             data = content.encode("utf-8") if isinstance(content, str) else content
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
+            os.chmod(tmp_name, 0o666 & ~umask)
         for tmp, final in temps:
             os.replace(tmp, final)
     except OSError as exc:

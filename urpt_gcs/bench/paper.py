@@ -16,6 +16,7 @@ nadir points.
 from __future__ import annotations
 
 import csv
+import io
 import itertools
 import math
 import time
@@ -28,6 +29,7 @@ import pyproj
 from affine import Affine
 
 from urpt_gcs.gtsp import Instance, build_instance, euclidean_matrix
+from urpt_gcs.output import write_all
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.approx import paper_path
 from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
@@ -217,12 +219,13 @@ def run_paper(
 
 
 def write_csv(rows: Sequence[Row], path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(Row.__slots__))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow(asdict(row))
+    """Write the rows as CSV, all or nothing."""
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(Row.__slots__), lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow(asdict(row))
+    write_all(path.parent, {path.name: text.getvalue()})
 
 
 def _cell_table(title: str, rows: Sequence[Row], cell: Callable[[list[Row]], str]) -> str:
