@@ -1,6 +1,7 @@
 """Solvers for the viewpoint GTSP, all behind one interface: ``Instance -> Tour``.
 
 - ``exact``: dynamic programming over covered-target subsets; proves optimality.
+- ``approx``: the paper's constant-factor algorithm, every photo point checked.
 - ``ortools``: OR-Tools routing with guided local search (a baseline).
 - ``auto``: ``exact`` when its estimated work fits the budget, else the best heuristic.
 """
@@ -9,12 +10,14 @@ from __future__ import annotations
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance
+from urpt_gcs.solvers.approx import ApproxSolver
 from urpt_gcs.solvers.base import Solver, SolveSettings, Tour
 from urpt_gcs.solvers.exact import ExactSolver, exact_work
 from urpt_gcs.solvers.routing import RoutingSolver
 
 SOLVERS: dict[str, type[Solver]] = {
     "exact": ExactSolver,
+    "approx": ApproxSolver,
     "ortools": RoutingSolver,
 }
 SOLVER_CHOICES = ("auto", *SOLVERS)
