@@ -116,33 +116,41 @@ def sees(
 
 def check_mission(
     dem: Path,
-    waypoints_file: Path,
+    waypoints_file: Path | list[Path],
     targets: list[tuple[str, float, float]],
     fov_deg: float,
     min_clearance_m: float = 0.0,
 ) -> list[str]:
-    """Every problem found: unseen targets and legs that clip the terrain."""
+    """Every problem found: unseen targets and legs that clip the terrain. Several files are
+    the sorties of one plan: together they must see every target."""
     raster = load_raster(dem)
-    flown = read_waypoints_file(waypoints_file)
+    files = waypoints_file if isinstance(waypoints_file, list) else [waypoints_file]
+    sorties = [read_waypoints_file(f) for f in files]
+    assert sorties, "no mission file"
+    eyes = [w for flown in sorties for w in flown.waypoints]
     problems = []
     for name, lat, lon in targets:
         reasons = []
-        for eye in flown.waypoints:
+        for eye in eyes:
             ok, why = sees(raster, (lat, lon), eye, fov_deg)
             if ok:
                 break
             reasons.append(why)
         else:
             problems.append(f"target {name} is seen from no waypoint: {sorted(set(reasons))[:3]}")
-    altitude = {round(w[2], 3) for w in flown.waypoints}
+    altitude = {round(w[2], 3) for w in eyes}
     assert len(altitude) == 1, "the flight plane is not constant"
-    h = flown.waypoints[0][2]
-    path = [flown.home[:2], *[w[:2] for w in flown.waypoints], flown.home[:2]]
-    for k, (a, b) in enumerate(itertools.pairwise(path), start=1):
-        _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
-        lon, lat, _ = _segment(raster, a, b, dist)
-        ground = raster.height(lon, lat)
-        known = ground[np.isfinite(ground)]
-        if known.size and float(known.max()) > h - min_clearance_m:
-            problems.append(f"leg {k} passes {h - float(known.max()):.2f} m over the terrain")
+    h = eyes[0][2]
+    for number, flown in enumerate(sorties, start=1):
+        path = [flown.home[:2], *[w[:2] for w in flown.waypoints], flown.home[:2]]
+        for k, (a, b) in enumerate(zip(path[:-1], path[1:], strict=True), start=1):
+            _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
+            lon, lat, _ = _segment(raster, a, b, dist)
+            ground = raster.height(lon, lat)
+            known = ground[np.isfinite(ground)]
+            if known.size and float(known.max()) > h - min_clearance_m:
+                problems.append(
+                    f"sortie {number} leg {k} passes "
+                    f"{h - float(known.max()):.2f} m over the terrain"
+                )
     return problems

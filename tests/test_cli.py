@@ -56,7 +56,7 @@ def _assert_clean_failure(result, out: Path, *words: str) -> None:
     assert not out.exists(), "a failed run left output behind"
 
 
-def test_good_run_writes_the_three_files(site: dict[str, Path]) -> None:
+def test_good_run_writes_every_output(site: dict[str, Path]) -> None:
     out = site["tmp"] / "out"
     result = _run(
         [
@@ -77,10 +77,14 @@ def test_good_run_writes_the_three_files(site: dict[str, Path]) -> None:
     assert data["targets"] == 2
     assert data["home"]["source"] == "placemark 'Home'"
     assert sorted(p.name for p in out.iterdir()) == [
+        "map.png",
         "mission.plan",
         "mission.waypoints",
+        "plan.geojson",
+        "plan.kml",
         "summary.json",
     ]
+    assert (out / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_home_flag_overrides_and_missing_home_is_reported(site: dict[str, Path]) -> None:

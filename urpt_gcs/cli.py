@@ -86,6 +86,22 @@ def main() -> None:
     help="Refuse a plan whose legs pass closer than this to the terrain, metres.",
 )
 @click.option(
+    "--max-agl",
+    type=float,
+    default=120.0,
+    show_default=True,
+    help="Height above ground (under every stop, and above home) to warn about, metres.",
+)
+@click.option("--strict", is_flag=True, help="Refuse, rather than warn, over --max-agl.")
+@click.option(
+    "--endurance",
+    type=float,
+    default=20.0,
+    show_default=True,
+    help="Battery endurance, minutes; a longer tour is split into sorties.",
+)
+@click.option("--no-map", is_flag=True, help="Do not draw map.png.")
+@click.option(
     "--home", "home", default=None, help="Take-off point LAT,LON (overrides a Home placemark)."
 )
 @click.option(
@@ -132,6 +148,10 @@ def plan_command(
     altitude: float | None,
     clearance: float,
     min_clearance: float,
+    max_agl: float,
+    strict: bool,
+    endurance: float,
+    no_map: bool,
     home: str | None,
     hold: float,
     speed: float,
@@ -155,6 +175,9 @@ def plan_command(
             altitude_m=altitude,
             clearance_m=clearance,
             min_clearance_m=min_clearance,
+            max_agl_m=max_agl,
+            strict=strict,
+            endurance_min=endurance,
             home=_parse_home(home),
             solver=solver,
             solve=SolveSettings(time_limit_s=time_limit, seed=seed),
@@ -168,7 +191,7 @@ def plan_command(
         interactive = sys.stderr.isatty() and not (quiet or as_json)
         progress = (lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None
         result = plan(Path(dem), Path(targets), settings, progress=progress)
-        data = write_products(result, Path(out))
+        data = write_products(result, Path(out), with_map=not no_map)
         if export_gtsp is not None:
             from urpt_gcs.formats.gtsplib import export_gtsplib
 

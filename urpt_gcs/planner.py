@@ -19,6 +19,16 @@ import pyproj
 from urpt_gcs.errors import DemError, PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance
 from urpt_gcs.mission import GeoPoint, Mission, MissionSettings, build_mission
+from urpt_gcs.safety import (
+    FlightModel,
+    Leg,
+    Sortie,
+    check_height_above_ground,
+    check_legs,
+    geofence_polygon,
+    leg_clearances,
+    split_sorties,
+)
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, solve
 from urpt_gcs.targets import Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
@@ -53,6 +63,10 @@ class PlanSettings:
     climb_m_s: float = 2.5
     descent_m_s: float = 1.5
     accel_m_s2: float = 2.5
+    max_agl_m: float = 120.0
+    strict: bool = False
+    endurance_min: float | None = 20.0
+    geofence_margin_m: float = 30.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
@@ -73,6 +87,14 @@ class PlanSettings:
             raise SettingsError(
                 f"--min-clearance {self.min_clearance_m} must be zero or more metres"
             )
+        if not (math.isfinite(self.max_agl_m) and self.max_agl_m > 0.0):
+            raise SettingsError(f"--max-agl {self.max_agl_m} must be a positive number of metres")
+        if self.endurance_min is not None and not (
+            math.isfinite(self.endurance_min) and self.endurance_min > 0.0
+        ):
+            raise SettingsError(
+                f"--endurance {self.endurance_min} must be a positive number of minutes"
+            )
         if self.solver not in SOLVER_CHOICES:
             raise SettingsError(
                 f"--solver {self.solver!r} is not known: use one of {', '.join(SOLVER_CHOICES)}"
@@ -86,17 +108,6 @@ class PlanSettings:
                 and -180 <= lon <= 180
             ):
                 raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees")
-
-
-@dataclass(frozen=True, slots=True)
-class Leg:
-    """One straight leg of the flight at the plane's altitude, with its terrain clearance."""
-
-    start: str
-    end: str
-    length_m: float
-    min_clearance_m: float
-    unknown_m: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,10 +130,21 @@ class Plan:
     instance: Instance
     tour: Tour
     legs: tuple[Leg, ...]
-    mission: Mission
+    sorties: tuple[Sortie, ...]
+    missions: tuple[Mission, ...]
+    geofence_latlon: tuple[tuple[float, float], ...]
     flight_time_s: float
     timings_s: dict[str, float]
     warnings: tuple[str, ...]
+
+    @property
+    def flight_model(self) -> FlightModel:
+        return flight_model(self.settings)
+
+    @property
+    def mission(self) -> Mission:
+        """The mission of the first (or only) sortie."""
+        return self.missions[0]
 
     @property
     def altitude_rel_m(self) -> float:
@@ -190,32 +212,6 @@ def _check_ground(
     raise TargetsError(
         f"{where} is on a nodata cell of DEM '{info.path}': move it onto surveyed ground"
     )
-
-
-def _legs(
-    terrain: Terrain, stops_xy: FloatArray, names: list[str], altitude_m: float
-) -> tuple[Leg, ...]:
-    """Sample every leg of the closed path through ``stops_xy`` against the terrain."""
-    legs = []
-    step = terrain.cell_m / 2.0
-    for i in range(len(stops_xy) - 1):
-        a, b = stops_xy[i], stops_xy[i + 1]
-        length = float(np.hypot(*(b - a)))
-        n = max(math.ceil(length / step), 1)
-        t = np.linspace(0.0, 1.0, n + 1)
-        z = terrain.sample(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
-        known = np.isfinite(z)
-        clearance = float(altitude_m - np.max(z[known])) if known.any() else math.nan
-        legs.append(
-            Leg(
-                names[i],
-                names[i + 1],
-                length,
-                clearance,
-                float((~known).sum() / max(n + 1, 1) * length),
-            )
-        )
-    return tuple(legs)
 
 
 def plan(
@@ -322,34 +318,43 @@ def plan(
 
     if tour.points_xy is None:
         raise PlanError(f"internal check failed: solver {tour.solver} returned no positions")
-    stops = np.vstack([[home_xy], tour.points_xy, [home_xy]])
-    stop_names = ["home", *(_stop_name(row, names) for row in tour.sees), "home"]
-    legs = _legs(terrain, stops, stop_names, altitude)
-    for number, leg in enumerate(legs, start=1):
-        if math.isfinite(leg.min_clearance_m) and leg.min_clearance_m < settings.min_clearance_m:
-            raise PlanError(
-                f"leg {number} ({leg.start} -> {leg.end}) passes {leg.min_clearance_m:.1f} m "
-                f"above the terrain, under --min-clearance {settings.min_clearance_m:g} m: "
-                "raise --altitude or --clearance"
-            )
-        if leg.unknown_m > 0.0:
-            warnings.append(
-                f"leg {number} ({leg.start} -> {leg.end}) crosses {leg.unknown_m:.0f} m without "
-                "elevation data: its clearance there is not verified"
-            )
-    lap("checks")
-
-    home = GeoPoint(home_lat, home_lon, round(home_ground, 2))
     # Centimetre altitudes, rounded up: a higher eye only widens the cone and lifts every
     # line of sight, so nothing checked above is lost.
     altitude_rel = math.ceil((altitude - home_ground) * 100.0) / 100.0
-    mission = build_mission(
-        home,
-        _latlon(crs, tour.points_xy),
-        altitude_rel,
-        settings.mission,
+    stop_names = [
+        f"stop {k} ({_stop_name(row, names)})" for k, row in enumerate(tour.sees, start=1)
+    ]
+    model = flight_model(settings)
+    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
+    sorties = split_sorties(tour.points_xy, home_xy, altitude_rel, model, endurance, stop_names)
+    legs: tuple[Leg, ...] = ()
+    for sortie in sorties:
+        path = np.vstack([[home_xy], tour.points_xy[sortie.first : sortie.stop], [home_xy]])
+        legs += leg_clearances(
+            terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], altitude
+        )
+    warnings += check_legs(legs, settings.min_clearance_m)
+    stop_ground = terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
+    warnings += check_height_above_ground(
+        altitude, stop_ground, stop_names, home_ground, settings.max_agl_m, settings.strict
     )
-    flight_time = _flight_time(settings, tour, altitude_rel)
+    if len(sorties) > 1:
+        warnings.append(
+            f"the tour needs {len(sorties)} sorties to fit --endurance "
+            f"{settings.endurance_min:g} min; each returns home"
+        )
+    fence_xy = geofence_polygon(
+        np.vstack([[home_xy], tour.points_xy, targets_xy]), settings.geofence_margin_m
+    )
+    fence = tuple(_latlon(crs, fence_xy))
+    lap("checks")
+
+    home = GeoPoint(home_lat, home_lon, round(home_ground, 2))
+    stops_latlon = _latlon(crs, tour.points_xy)
+    missions = tuple(
+        build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
+        for s in sorties
+    )
     lap("mission")
     return Plan(
         settings=settings,
@@ -368,10 +373,23 @@ def plan(
         instance=instance,
         tour=tour,
         legs=legs,
-        mission=mission,
-        flight_time_s=flight_time,
+        sorties=sorties,
+        missions=missions,
+        geofence_latlon=fence,
+        flight_time_s=sum(s.flight_time_s for s in sorties),
         timings_s=timings,
         warnings=tuple(warnings),
+    )
+
+
+def flight_model(settings: PlanSettings) -> FlightModel:
+    """How the flight-time estimate sees the vehicle, from the settings."""
+    return FlightModel(
+        cruise_m_s=settings.mission.cruise_speed_m_s,
+        climb_m_s=settings.climb_m_s,
+        descent_m_s=settings.descent_m_s,
+        accel_m_s2=settings.accel_m_s2,
+        hold_s=settings.mission.hold_s,
     )
 
 
@@ -383,18 +401,6 @@ def _latlon(crs: pyproj.CRS, xy: FloatArray) -> list[tuple[float, float]]:
     to_geo = pyproj.Transformer.from_crs(crs, WGS84, always_xy=True)
     lon, lat = to_geo.transform(xy[:, 0], xy[:, 1])
     return list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist(), strict=True))
-
-
-def _flight_time(settings: PlanSettings, tour: Tour, altitude_rel_m: float) -> float:
-    """Estimated flight time: climb, cruise, a full stop and hold at each viewpoint, descent."""
-    speed = settings.mission.cruise_speed_m_s
-    stops = len(tour.order)
-    return (
-        altitude_rel_m / settings.climb_m_s
-        + tour.length / speed
-        + stops * (settings.mission.hold_s + speed / settings.accel_m_s2)
-        + altitude_rel_m / settings.descent_m_s
-    )
 
 
 __all__ = ["Leg", "Plan", "PlanSettings", "Target", "plan"]

@@ -6,7 +6,9 @@ import math
 from typing import Any
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from urpt_gcs.mission import Mission
 from urpt_gcs.planner import Plan
 
 
@@ -20,21 +22,42 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
     inst = plan.instance
     names = [t.name for t in plan.targets.targets]
     stops = []
-    previous = np.asarray(plan.home_xy)
     assert tour.points_xy is not None
-    for k, (xy, sees, item) in enumerate(
-        zip(tour.points_xy, tour.sees, _waypoint_items(plan), strict=True), start=1
-    ):
-        stops.append(
-            {
-                "order": k,
-                "lat_deg": item[0],
-                "lon_deg": item[1],
-                "sees": [names[t] for t in np.flatnonzero(sees).tolist()],
-                "from_previous_m": round(float(np.hypot(*(xy - previous))), 2),
-            }
-        )
-        previous = xy
+    model = plan.flight_model
+    waypoints = [latlon for m in plan.missions for latlon in _waypoint_items(m)]
+    for number, sortie in enumerate(plan.sorties, start=1):
+        previous = np.asarray(plan.home_xy)
+        path = 0.0
+        for k in range(sortie.first, sortie.stop):
+            xy = tour.points_xy[k]
+            hop = float(np.hypot(*(xy - previous)))
+            path += hop
+            eta = (
+                plan.altitude_rel_m / model.climb_m_s
+                + path / model.cruise_m_s
+                + (k - sortie.first) * (model.hold_s + model.cruise_m_s / model.accel_m_s2)
+            )
+            stops.append(
+                {
+                    "order": k + 1,
+                    "sortie": number,
+                    "lat_deg": waypoints[k][0],
+                    "lon_deg": waypoints[k][1],
+                    "sees": [names[t] for t in np.flatnonzero(tour.sees[k]).tolist()],
+                    "from_previous_m": round(hop, 2),
+                    "eta_s": round(eta, 1),
+                }
+            )
+            previous = xy
+    sorties = [
+        {
+            "sortie": n,
+            "stops": s.stop - s.first,
+            "length_m": round(s.length_m, 2),
+            "flight_time_s": round(s.flight_time_s, 1),
+        }
+        for n, s in enumerate(plan.sorties, start=1)
+    ]
     return {
         "targets": len(names),
         "target_names": names,
@@ -71,6 +94,10 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "min_leg_clearance_m": _round(
             min((leg.min_clearance_m for leg in plan.legs), default=math.nan)
         ),
+        "sorties": sorties,
+        "max_agl_m": plan.settings.max_agl_m,
+        "endurance_min": plan.settings.endurance_min,
+        "geofence_vertices": len(plan.geofence_latlon),
         "stops": stops,
         "timings_s": {k: round(v, 3) for k, v in plan.timings_s.items()},
         "warnings": list(plan.warnings),
@@ -78,12 +105,10 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
     }
 
 
-def _waypoint_items(plan: Plan) -> list[tuple[float, float]]:
-    from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
+def _waypoint_items(mission: Mission) -> list[tuple[float, float]]:
     return [
         (item.params[4], item.params[5])
-        for item in plan.mission.items
+        for item in mission.items
         if item.command == mavlink.MAV_CMD_NAV_WAYPOINT
     ]
 
@@ -122,6 +147,25 @@ def summary_text(data: dict[str, Any]) -> str:
         f"clearance      at least {data['min_leg_clearance_m']} m over terrain on every leg",
         f"firmware       {data['firmware']}",
     ]
+    if len(data["sorties"]) > 1:
+        lines.append(
+            f"sorties        {len(data['sorties'])} (battery --endurance "
+            f"{data['endurance_min']:g} min): "
+            + ", ".join(
+                f"#{s['sortie']} {s['stops']} stops {_minutes(s['flight_time_s'])}"
+                for s in data["sorties"]
+            )
+        )
+    lines.append("stops          #  sortie  from prev   ETA      sees")
+    shown = data["stops"][:25]
+    for stop in shown:
+        lines.append(
+            f"               {stop['order']:<3d}{stop['sortie']:^7d}"
+            f"{stop['from_previous_m']:8.1f} m"
+            f"  {_minutes(stop['eta_s']):>9s}  {', '.join(stop['sees'])}"
+        )
+    if len(data["stops"]) > len(shown):
+        lines.append(f"               ... {len(data['stops']) - len(shown)} more in summary.json")
     lines += [f"warning        {w}" for w in data["warnings"]]
     if data["files"]:
         lines.append("files          " + "\n               ".join(data["files"]))

@@ -1,0 +1,160 @@
+"""Preflight safety: legs against the terrain, height above ground, sorties, geofence, and
+the KML/GeoJSON exports read back by third-party readers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyproj
+import pytest
+import shapely
+from click.testing import CliRunner
+from conftest import DEMO, WriteDem, grid_xy
+from fastkml import kml as fastkml
+from independent import check_mission
+from shapely.geometry import Point, shape
+
+from urpt_gcs.cli import main
+from urpt_gcs.errors import PlanError
+from urpt_gcs.planner import PlanSettings, plan
+from urpt_gcs.products import write_products
+from urpt_gcs.solvers import SolveSettings
+from urpt_gcs.targets import read_targets
+
+ORIGIN = (500_000.0, 5_200_000.0)
+TO_GEO = pyproj.Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True)
+FAST = SolveSettings(time_limit_s=1.0)
+
+
+def _csv(path: Path, points: list[tuple[str, float, float]]) -> Path:
+    rows = []
+    for name, x, y in points:
+        lon, lat = TO_GEO.transform(ORIGIN[0] + x, ORIGIN[1] - y)
+        rows.append(f"{name},{lat:.9f},{lon:.9f}")
+    path.write_text("name,lat,lon\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_leg_through_a_ridge_is_refused(tmp_path: Path, write_dem: WriteDem) -> None:
+    """Flat ground at 100 m, a 4 m wide ridge rising to 200 m across the middle, flight plane
+    at 150 m: targets on both sides force a leg across the ridge."""
+    x, _ = grid_xy((400, 400), 0.5, ORIGIN)
+    z = np.full((400, 400), 100.0)
+    z[np.abs(x - ORIGIN[0] - 100.0) < 2.0] = 200.0
+    dem = write_dem(z, origin=ORIGIN)
+    targets = _csv(
+        tmp_path / "t.csv", [("West", 60.0, 100.0), ("East", 140.0, 100.0), ("Home", 60.0, 150.0)]
+    )
+    with pytest.raises(PlanError, match=r"leg \d .*cuts .* into the terrain"):
+        plan(dem, targets, PlanSettings(altitude_m=150.0, solve=FAST))
+    # The same ridge under a plane 30 m above it is flown.
+    ok = plan(dem, targets, PlanSettings(altitude_m=230.0, solve=FAST))
+    assert min(leg.min_clearance_m for leg in ok.legs) >= 30.0 - 0.5
+
+
+def test_short_endurance_splits_into_sorties_that_together_see_everything(
+    tmp_path: Path,
+) -> None:
+    settings = PlanSettings(solve=FAST, endurance_min=3.0)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    assert len(result.sorties) >= 2
+    for sortie in result.sorties:
+        assert sortie.flight_time_s <= 3.0 * 60.0
+    out = tmp_path / "out"
+    data = write_products(result, out, with_map=False)
+    files = sorted(out.glob("mission_*.waypoints"))
+    assert [f.name for f in files] == [
+        f"mission_{k}.waypoints" for k in range(1, len(result.sorties) + 1)
+    ]
+    assert len(list(out.glob("mission_*.plan"))) == len(files)
+    assert not (out / "mission.plan").exists()
+    targets = [(t.name, t.lat_deg, t.lon_deg) for t in read_targets(DEMO / "targets.kml").targets]
+    assert (
+        check_mission(DEMO / "site.tif", files, targets, fov_deg=30.0, min_clearance_m=10.0) == []
+    )
+    assert any("sorties" in w for w in data["warnings"])
+    # Each sortie returns home: its last item is RTL.
+    for f in out.glob("mission_*.plan"):
+        items = json.loads(f.read_text())["mission"]["items"]
+        assert items[-1]["command"] == 20
+
+
+def test_max_agl_warns_and_strict_refuses(tmp_path: Path) -> None:
+    base = [
+        "plan",
+        "--dem",
+        str(DEMO / "site.tif"),
+        "--targets",
+        str(DEMO / "targets.kml"),
+        "--time-limit",
+        "0.5",
+        "--no-map",
+        "--max-agl",
+        "50",
+    ]
+    warn = CliRunner().invoke(main, [*base, "--out", str(tmp_path / "a"), "--json"])
+    assert warn.exit_code == 0, warn.output
+    assert any("--max-agl 50" in w for w in json.loads(warn.stdout)["warnings"])
+    strict = CliRunner().invoke(main, [*base, "--out", str(tmp_path / "b"), "--strict"])
+    assert strict.exit_code == 1
+    assert "--max-agl 50" in strict.stderr and len(strict.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.fixture(scope="module")
+def demo_outputs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("demo")
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", PlanSettings(solve=FAST))
+    data = write_products(result, out, with_map=False)
+    return out, data
+
+
+def test_geofence_encloses_the_flight(demo_outputs: tuple[Path, dict]) -> None:
+    out, _ = demo_outputs
+    doc = json.loads((out / "mission.plan").read_text())
+    (polygon,) = doc["geoFence"]["polygons"]
+    assert polygon["inclusion"] is True
+    fence = shapely.Polygon([(lon, lat) for lat, lon in polygon["polygon"]])
+    home_lat, home_lon, _ = doc["mission"]["plannedHomePosition"]
+    assert fence.contains(Point(home_lon, home_lat))
+    for item in doc["mission"]["items"]:
+        if item["command"] == 16:
+            assert fence.contains(Point(item["params"][5], item["params"][4]))
+
+
+def test_kml_read_back_by_fastkml(demo_outputs: tuple[Path, dict]) -> None:
+    out, data = demo_outputs
+    doc = fastkml.KML.from_string((out / "plan.kml").read_bytes())
+    (document,) = doc.features
+    folders = {f.name: list(f.features) for f in document.features}
+    assert len(folders["Targets"]) == data["targets"]
+    assert len(folders["Viewpoints"]) == data["tour_stops"]
+    assert len(folders["Visibility regions"]) == data["targets"]
+    (tour,) = folders["Tour"]
+    coords = list(tour.geometry.coords)
+    assert len(coords) == data["tour_stops"] + 2
+    assert {round(c[2], 2) for c in coords} == {data["altitude_amsl_m"]}
+    first = folders["Viewpoints"][0].geometry
+    assert first.x == pytest.approx(data["stops"][0]["lon_deg"], abs=1e-7)
+    assert first.y == pytest.approx(data["stops"][0]["lat_deg"], abs=1e-7)
+    names = {p.name for p in folders["Targets"]}
+    assert names == set(data["target_names"])
+
+
+def test_geojson_read_back_by_shapely(demo_outputs: tuple[Path, dict]) -> None:
+    out, data = demo_outputs
+    collection = json.loads((out / "plan.geojson").read_text())
+    kinds: dict[str, list] = {}
+    for feature in collection["features"]:
+        kinds.setdefault(feature["properties"]["kind"], []).append(shape(feature["geometry"]))
+    assert len(kinds["target"]) == data["targets"]
+    assert len(kinds["viewpoint"]) == data["tour_stops"]
+    assert all(g.is_valid and g.area > 0 for g in kinds["region"])
+    (tour,) = kinds["tour"]
+    # Each target lies inside its own region polygon.
+    for region, target in zip(kinds["region"], kinds["target"], strict=True):
+        assert region.buffer(1e-9).contains(Point(target.x, target.y))
+    geod = pyproj.Geod(ellps="WGS84")
+    assert geod.geometry_length(tour) == pytest.approx(data["tour_length_m"], rel=2e-3)

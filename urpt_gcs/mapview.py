@@ -1,0 +1,206 @@
+"""The plan on a map: hillshaded DSM, regions, targets, tour, home, scale bar and north arrow.
+
+Drawn with matplotlib's object API (no pyplot, no global state) in the planning CRS, so
+distances on the picture are metres on the ground.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import LightSource
+from matplotlib.figure import Figure
+from matplotlib.patches import FancyArrow
+from matplotlib.patches import Polygon as PolygonPatch
+from matplotlib.transforms import Affine2D
+
+from urpt_gcs.planner import Plan
+from urpt_gcs.terrain import FloatArray
+
+# Longest side of the raster drawn, in pixels; larger windows are decimated for display.
+_MAX_DISPLAY_PX = 1600
+
+
+def _nice_length(span_m: float) -> float:
+    """A round scale-bar length near a fifth of ``span_m``."""
+    raw = span_m / 5.0
+    power = 10.0 ** math.floor(math.log10(raw))
+    return float(next(k * power for k in (5, 2, 1) if k * power <= raw))
+
+
+def _hillshade(z: FloatArray, cell_m: float) -> FloatArray:
+    filled = np.where(np.isfinite(z), z, np.nanmean(z) if np.isfinite(z).any() else 0.0)
+    shade: FloatArray = LightSource(azdeg=315, altdeg=45).hillshade(
+        filled, vert_exag=1.0, dx=cell_m, dy=cell_m
+    )
+    return np.where(np.isfinite(z), shade, np.nan)
+
+
+def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
+    """A PNG of the plan, for the operator to check at a glance."""
+    terrain = plan.terrain
+    step = max(1, math.ceil(max(terrain.elevation_m.shape) / _MAX_DISPLAY_PX))
+    z = terrain.elevation_m[::step, ::step]
+    t = terrain.transform
+    pixel_to_map = Affine2D.from_values(t.a * step, t.d * step, t.b * step, t.e * step, t.c, t.f)
+
+    fig = Figure(figsize=(11, 10), dpi=110)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_aspect("equal")
+    ax.set_facecolor("#eeeeee")
+
+    rows, cols = z.shape
+    extent = (0.0, float(cols), float(rows), 0.0)
+    shade = np.ma.masked_invalid(_hillshade(z, terrain.cell_m * step))
+    gray = ax.imshow(shade, cmap="gray", extent=extent, interpolation="nearest", vmin=0, vmax=1)
+    gray.set_transform(pixel_to_map + ax.transData)
+    tint = ax.imshow(
+        np.ma.masked_invalid(z), cmap="terrain", alpha=0.45, extent=extent, interpolation="nearest"
+    )
+    tint.set_transform(pixel_to_map + ax.transData)
+    nodata = np.ma.masked_where(np.isfinite(z), np.ones_like(z))
+    hole = ax.imshow(
+        nodata, cmap="Reds", vmin=0, vmax=3, extent=extent, alpha=0.55, interpolation="nearest"
+    )
+    hole.set_transform(pixel_to_map + ax.transData)
+    bar = fig.colorbar(tint, ax=ax, shrink=0.6, pad=0.01)
+    bar.set_label("elevation (m, DEM datum); red: no data")
+
+    palette = [f"C{k % 10}" for k in range(len(plan.regions))]
+    for region, colour in zip(plan.regions, palette, strict=True):
+        if region.polygon.is_empty:
+            continue
+        ring = np.asarray(region.polygon.exterior.coords)
+        ax.add_patch(
+            PolygonPatch(
+                ring, closed=True, facecolor=colour, edgecolor=colour, alpha=0.18, linewidth=1.2
+            )
+        )
+        ax.add_patch(PolygonPatch(ring, closed=True, fill=False, edgecolor=colour, linewidth=1.2))
+
+    names = [t.name for t in plan.targets.targets]
+    tx, ty = plan.targets_xy[:, 0], plan.targets_xy[:, 1]
+    ax.scatter(tx, ty, marker="^", s=60, c=palette, edgecolors="black", zorder=5, label="target")
+    for x, y, name in zip(tx, ty, names, strict=True):
+        ax.annotate(
+            name,
+            (x, y),
+            xytext=(4, 4),
+            textcoords="offset points",
+            fontsize=7,
+            zorder=6,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0},
+        )
+
+    stops = plan.tour.points_xy
+    assert stops is not None
+    hx, hy = plan.home_xy
+    path = np.vstack([[plan.home_xy], stops, [plan.home_xy]])
+    ax.plot(path[:, 0], path[:, 1], "-", color="black", linewidth=2.4, zorder=7)
+    ax.plot(path[:, 0], path[:, 1], "-", color="#ffd400", linewidth=1.4, zorder=8, label="tour")
+    for k, (x, y) in enumerate(stops, start=1):
+        ax.annotate(
+            str(k),
+            (x, y),
+            ha="center",
+            va="center",
+            fontsize=7,
+            fontweight="bold",
+            zorder=10,
+            bbox={"boxstyle": "circle,pad=0.2", "fc": "#ffd400", "ec": "black", "lw": 0.8},
+        )
+    ax.scatter(
+        [hx], [hy], marker="*", s=260, c="white", edgecolors="black", zorder=11, label="home"
+    )
+
+    everything = np.vstack(
+        [path, plan.targets_xy]
+        + [np.asarray(r.polygon.exterior.coords) for r in plan.regions if not r.polygon.is_empty]
+    )
+    lo, hi = everything.min(axis=0), everything.max(axis=0)
+    pad = 0.08 * float(max(hi - lo)) + 5.0
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    _scale_bar_and_north(ax, lo - pad, hi + pad)
+    ax.set_xlabel(f"easting (m, {plan.crs.name})")
+    ax.set_ylabel("northing (m)")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.tick_params(labelsize=7)
+    quality = (
+        "proven optimal"
+        if data["proven_optimal"]
+        else f"≤ {data['gap_pct']:.1f} % above optimal"
+        if data["gap_pct"] is not None
+        else "no bound"
+    )
+    ax.set_title(
+        f"{data['targets']} targets, {data['tour_stops']} stops, tour {data['tour_length_m']:.0f} m"
+        f" ({quality}), {data['flight_time_s'] / 60:.1f} min\n"
+        f"altitude {data['altitude_amsl_m']:.1f} m AMSL / {data['altitude_above_home_m']:.1f} m "
+        f"above home, camera ±{data['fov_deg']:g}°, solver {data['solver']}",
+        fontsize=10,
+    )
+    ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
+    fig.tight_layout()
+    out = io.BytesIO()
+    fig.savefig(out, format="png")
+    return out.getvalue()
+
+
+def _scale_bar_and_north(ax: Any, lo: FloatArray, hi: FloatArray) -> None:
+    span = float(hi[0] - lo[0])
+    length = _nice_length(span)
+    x0 = float(lo[0]) + 0.05 * span
+    y0 = float(lo[1]) + 0.05 * float(hi[1] - lo[1])
+    ax.plot(
+        [x0, x0 + length], [y0, y0], color="black", linewidth=4, zorder=12, solid_capstyle="butt"
+    )
+    ax.plot(
+        [x0, x0 + length],
+        [y0, y0],
+        color="white",
+        linewidth=2,
+        zorder=13,
+        solid_capstyle="butt",
+        dashes=(4, 4),
+    )
+    ax.text(
+        x0 + length / 2,
+        y0 + 0.015 * float(hi[1] - lo[1]),
+        f"{length:g} m",
+        ha="center",
+        va="bottom",
+        fontsize=8,
+        zorder=13,
+    )
+    height = float(hi[1] - lo[1])
+    ax_x = float(hi[0]) - 0.06 * span
+    ax_y = float(hi[1]) - 0.16 * height
+    ax.add_patch(
+        FancyArrow(
+            ax_x,
+            ax_y,
+            0.0,
+            0.08 * height,
+            width=0.012 * span,
+            head_width=0.035 * span,
+            head_length=0.03 * height,
+            color="black",
+            zorder=12,
+        )
+    )
+    ax.text(
+        ax_x,
+        ax_y + 0.11 * height,
+        "N",
+        ha="center",
+        va="bottom",
+        fontsize=12,
+        fontweight="bold",
+        zorder=12,
+    )
