@@ -143,7 +143,7 @@ def check_mission(
     h = eyes[0][2]
     for number, flown in enumerate(sorties, start=1):
         path = [flown.home[:2], *[w[:2] for w in flown.waypoints], flown.home[:2]]
-        for k, (a, b) in enumerate(zip(path[:-1], path[1:], strict=True), start=1):
+        for k, (a, b) in enumerate(itertools.pairwise(path), start=1):
             _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
             lon, lat, _ = _segment(raster, a, b, dist)
             ground = raster.height(lon, lat)
