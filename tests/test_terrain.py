@@ -116,7 +116,7 @@ def test_geographic_dem_is_georeferenced_in_utm_without_resampling(name: str) ->
         full = src.read(1, masked=True).astype(np.float64).filled(np.nan)
         transform = src.transform
     lon_c, lat_c = (west + east) / 2, (south + north) / 2
-    crs = planning_crs(info, (lon_c, lat_c))
+    crs = planning_crs(info, (lon_c, lat_c, lon_c, lat_c))
     assert crs.to_epsg() == (32614 if "pysheds" in name else 32643)
     to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
     # A window of about a quarter of the raster around its centre.

@@ -256,8 +256,9 @@ def plan(
     home_lat, home_lon, home_source = _pick_home(targets, settings)
     names = [t.name for t in targets.targets]
     lat_lon = [(t.lat_deg, t.lon_deg) for t in targets.targets]
-    center = (float(np.mean([p[1] for p in lat_lon])), float(np.mean([p[0] for p in lat_lon])))
-    crs = planning_crs(info, center)
+    lats = [p[0] for p in lat_lon] + [home_lat]
+    lons = [p[1] for p in lat_lon] + [home_lon]
+    crs = planning_crs(info, (min(lons), min(lats), max(lons), max(lats)))
     to_xy = pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
     tx, ty = to_xy.transform([p[1] for p in lat_lon], [p[0] for p in lat_lon])
     targets_xy = np.column_stack([np.atleast_1d(tx), np.atleast_1d(ty)]).astype(np.float64)

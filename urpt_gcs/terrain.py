@@ -182,29 +182,33 @@ def _first_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
-def planning_crs(info: DemInfo, lon_lat_center: tuple[float, float]) -> pyproj.CRS:
-    """The metric CRS plans are made in: the DEM's own, or the UTM zone of the targets."""
+def planning_crs(info: DemInfo, lon_lat_bounds: tuple[float, float, float, float]) -> pyproj.CRS:
+    """The metric CRS plans are made in: the DEM's own, or the UTM zone of the points.
+
+    ``lon_lat_bounds`` is (west, south, east, north) of the targets and home. A geographic DEM
+    whose points straddle a UTM zone edge is refused: one flat map would distort one side.
+    """
     if not info.needs_warp:
         return info.horizontal_crs
-    lon, lat = lon_lat_center
+    west, south, east, north = lon_lat_bounds
     zones = query_utm_crs_info(
         datum_name="WGS 84",
-        area_of_interest=AreaOfInterest(lon, lat, lon, lat),
+        area_of_interest=AreaOfInterest(west, south, east, north),
     )
+    hemisphere = "N" if (south + north) / 2.0 >= 0 else "S"
+    zones = [z for z in zones if z.name.endswith(hemisphere)]
     if not zones:
         raise DemError(
-            f"DEM '{info.path}' is geographic and no UTM zone covers ({lat:.5f}, {lon:.5f}): "
+            f"DEM '{info.path}' is geographic and no UTM zone covers the targets: "
             "reproject it to a local metric CRS first"
         )
-    # Prefer the northern/southern zone matching the hemisphere (both cover the equator).
-    wanted = "N" if lat >= 0 else "S"
-    best = next((z for z in zones if z.name.endswith(wanted)), zones[0])
-    return pyproj.CRS.from_authority(best.auth_name, best.code)
-
-
-def to_planning(info: DemInfo, crs: pyproj.CRS) -> pyproj.Transformer:
-    """Transformer from WGS84 lon/lat to the planning CRS (x, y)."""
-    return pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
+    if len(zones) > 1:
+        names = " and ".join(z.name.rsplit(" ", 1)[-1] for z in zones[:2])
+        raise DemError(
+            f"DEM '{info.path}' is geographic and the targets straddle UTM zones {names}: "
+            "plan each side separately, or reproject the DEM to one projected CRS (gdalwarp)"
+        )
+    return pyproj.CRS.from_authority(zones[0].auth_name, zones[0].code)
 
 
 def _clean(values: npt.NDArray[np.generic], mask: npt.NDArray[np.bool_]) -> FloatArray:

@@ -1,0 +1,184 @@
+"""The bad-input catalogue: every sample in tests/data/bad/ named after the failure it causes.
+
+Each case: exit status 1, exactly one line on stderr naming the input and what to do, no
+traceback, and nothing written to the output folder.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from conftest import DEMO
+
+from urpt_gcs.cli import main
+
+BAD = Path(__file__).resolve().parent / "data" / "bad"
+SITE = str(DEMO / "site.tif")
+TARGETS = str(DEMO / "targets.kml")
+
+# name: (arguments after `urpt-gcs plan`, words the message must contain)
+PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
+    "dem_absent": (["--dem", str(BAD / "dem_absent.tif")], ["dem_absent.tif", "does not exist"]),
+    "dem_empty": (["--dem", str(BAD / "dem_empty.tif")], ["dem_empty.tif", "GeoTIFF"]),
+    "dem_truncated": (["--dem", str(BAD / "dem_truncated.tif")], ["dem_truncated.tif"]),
+    "dem_not_a_raster": (
+        ["--dem", str(BAD / "dem_not_a_raster.tif")],
+        ["dem_not_a_raster.tif", "not a readable raster"],
+    ),
+    "dem_is_a_folder": (["--dem", str(BAD)], ["is a folder"]),
+    "dem_without_crs": (
+        ["--dem", str(BAD / "dem_without_crs.tif")],
+        ["dem_without_crs.tif", "coordinate reference system"],
+    ),
+    "dem_all_nodata": (
+        ["--dem", str(BAD / "dem_all_nodata.tif")],
+        ["dem_all_nodata.tif", "no elevation"],
+    ),
+    "dem_rotated": (["--dem", str(BAD / "dem_rotated.tif")], ["dem_rotated.tif", "north-up"]),
+    "dem_geographic_across_utm_zones": (
+        [
+            "--dem",
+            str(BAD / "dem_geographic_across_utm_zones.tif"),
+            "--targets",
+            str(BAD / "dem_geographic_across_utm_zones.csv"),
+        ],
+        ["dem_geographic_across_utm_zones.tif", "UTM zones"],
+    ),
+    "targets_absent": (
+        ["--targets", str(BAD / "targets_absent.kml")],
+        ["targets_absent.kml", "does not exist"],
+    ),
+    "targets_outside_dem": (
+        ["--targets", str(BAD / "targets_outside_dem.csv")],
+        ["Far away", "outside DEM"],
+    ),
+    "targets_on_nodata": (
+        ["--targets", str(BAD / "targets_on_nodata.csv")],
+        ["Unsurveyed corner", "nodata"],
+    ),
+    "duplicate_targets": (
+        ["--targets", str(BAD / "duplicate_targets.kml")],
+        ["duplicate_targets.kml", "same place"],
+    ),
+    "empty_kml": (["--targets", str(BAD / "empty.kml")], ["empty.kml", "empty"]),
+    "kml_malformed": (
+        ["--targets", str(BAD / "kml_malformed.kml")],
+        ["kml_malformed.kml", "well-formed"],
+    ),
+    "kml_entity_expansion": (
+        ["--targets", str(BAD / "kml_entity_expansion.kml")],
+        ["kml_entity_expansion.kml", "entity"],
+    ),
+    "kml_external_entity": (
+        ["--targets", str(BAD / "kml_external_entity.kml")],
+        ["kml_external_entity.kml", "entity"],
+    ),
+    "kml_no_points": (
+        ["--targets", str(BAD / "kml_no_points.kml")],
+        ["kml_no_points.kml", "no Point"],
+    ),
+    "kmz_without_kml": (
+        ["--targets", str(BAD / "kmz_without_kml.kmz")],
+        ["kmz_without_kml.kmz", "without a .kml"],
+    ),
+    "kmz_not_a_zip": (["--targets", str(BAD / "kmz_not_a_zip.kmz")], ["kmz_not_a_zip.kmz", "zip"]),
+    "geojson_polygons_only": (
+        ["--targets", str(BAD / "geojson_polygons_only.geojson")],
+        ["geojson_polygons_only.geojson", "no Point"],
+    ),
+    "csv_missing_column": (
+        ["--targets", str(BAD / "csv_missing_column.csv")],
+        ["csv_missing_column.csv", "'lon' column"],
+    ),
+    "csv_non_numeric": (
+        ["--targets", str(BAD / "csv_non_numeric.csv")],
+        ["csv_non_numeric.csv", "not a number"],
+    ),
+    "csv_nan_lat": (["--targets", str(BAD / "csv_nan_lat.csv")], ["csv_nan_lat.csv", "nan"]),
+    "csv_lat_out_of_range": (
+        ["--targets", str(BAD / "csv_lat_out_of_range.csv")],
+        ["csv_lat_out_of_range.csv", "[-90, 90]"],
+    ),
+    "kml_lon_out_of_range": (
+        ["--targets", str(BAD / "kml_lon_out_of_range.kml")],
+        ["kml_lon_out_of_range.kml", "[-180, 180]"],
+    ),
+    "two_homes": (["--targets", str(BAD / "two_homes.kml")], ["two_homes.kml", "two homes"]),
+    "only_home": (["--targets", str(BAD / "only_home.kml")], ["only_home.kml", "no targets"]),
+    "unknown_extension": (
+        ["--targets", str(BAD / "unknown_extension.txt")],
+        ["unknown_extension.txt", ".kml"],
+    ),
+    "altitude_under_terrain": (["@altitude_under_terrain.args"], ["--altitude", "terrain"]),
+    "fov_zero": (["@fov_zero.args"], ["--fov", "(0, 90)"]),
+    "fov_90": (["@fov_90.args"], ["--fov", "(0, 90)"]),
+    "samples_2": (["@samples_2.args"], ["--samples", "at least 3"]),
+    "output_folder_is_a_file": (
+        ["--out", str(BAD / "output_folder_is_a_file")],
+        ["output_folder_is_a_file", "--out"],
+    ),
+}
+
+
+def _expand(args: list[str]) -> list[str]:
+    out: list[str] = []
+    for arg in args:
+        if arg.startswith("@"):
+            out += (BAD / arg[1:]).read_text().split()
+        else:
+            out.append(arg)
+    return out
+
+
+def run_case(args: list[str], out: Path) -> tuple[int, str]:
+    """Run `urpt-gcs plan` with the demo site's inputs overridden by ``args``."""
+    full = [
+        "plan",
+        "--dem",
+        SITE,
+        "--targets",
+        TARGETS,
+        "--out",
+        str(out),
+        "--time-limit",
+        "0.5",
+        "--no-map",
+        *_expand(args),
+    ]
+    result = CliRunner().invoke(main, full)
+    return result.exit_code, result.stderr
+
+
+@pytest.mark.parametrize("case", sorted(PLAN_CASES))
+def test_bad_input(case: str, tmp_path: Path) -> None:
+    args, words = PLAN_CASES[case]
+    out = tmp_path / "out"
+    before = sorted(p.name for p in BAD.iterdir())
+    code, stderr = run_case(args, out)
+    assert code == 1, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("urpt-gcs: error: ")
+    assert "Traceback" not in stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+    assert not out.exists()
+    assert sorted(p.name for p in BAD.iterdir()) == before, "a sample folder was written to"
+
+
+def test_every_sample_file_is_in_the_catalogue() -> None:
+    named = {a for args, _ in PLAN_CASES.values() for a in args}
+    used = {Path(a).name for a in named} | {a[1:] for a in named if a.startswith("@")}
+    samples = {p.name for p in BAD.iterdir() if p.suffix != ".py"}
+    # Samples the target reader's own tests cover in detail.
+    reader_only = {
+        "csv_header_only.csv",
+        "geojson_bad_coordinates.geojson",
+        "geojson_malformed.geojson",
+        "geojson_not_geojson.json",
+        "kml_bad_coordinates.kml",
+        "dem_geographic_across_utm_zones.csv",
+    }
+    assert samples - used - reader_only == set()
