@@ -287,3 +287,19 @@ def test_unwritable_output_leaves_nothing(site: dict[str, Path]) -> None:
         ]
     )
     _assert_clean_failure(result, out, "--out")
+
+
+def test_stage_progress_ticks_only_for_slow_stages() -> None:
+    import io
+    import time
+
+    from urpt_gcs.progress import StageProgress
+
+    stream = io.StringIO()
+    with StageProgress(stream, time_limit_s=2.0) as progress:
+        progress("reading targets")  # fast: nothing shown
+        progress("solving (10 viewpoints)")
+        time.sleep(1.4)
+    text = stream.getvalue()
+    assert "reading targets" not in text
+    assert "solving (10 viewpoints)" in text and "of 2 s" in text

@@ -16,6 +16,7 @@ from urpt_gcs import __version__
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.mission import FIRMWARES, MissionSettings
 from urpt_gcs.planner import PlanSettings
+from urpt_gcs.progress import StageProgress
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
 
 
@@ -188,9 +189,11 @@ def plan_command(
                 hover_speed_m_s=speed,
             ),
         )
-        interactive = sys.stderr.isatty() and not (quiet or as_json)
-        progress = (lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None
-        result = plan(Path(dem), Path(targets), settings, progress=progress)
+        if sys.stderr.isatty() and not (quiet or as_json):
+            with StageProgress(sys.stderr, time_limit) as progress:
+                result = plan(Path(dem), Path(targets), settings, progress=progress)
+        else:
+            result = plan(Path(dem), Path(targets), settings)
         data = write_products(result, Path(out), with_map=not no_map)
         if export_gtsp is not None:
             from urpt_gcs.formats.gtsplib import export_gtsplib
