@@ -11,14 +11,26 @@ from urpt_gcs.cli import main
 
 
 def test_bench_paper_quick(tmp_path: Path) -> None:
-    result = CliRunner().invoke(main, ["bench", "paper", "--quick", "--out", str(tmp_path),
-                                       "--heuristic-time", "0.3"])
+    result = CliRunner().invoke(
+        main, ["bench", "paper", "--quick", "--out", str(tmp_path), "--heuristic-time", "0.3"]
+    )
     assert result.exit_code == 0, result.output
     assert "Table I" in result.stdout
     rows = list(csv.DictReader((tmp_path / "results.csv").open()))
     assert len(rows) == 6
-    for key in ("terrain", "m", "fov_deg", "d", "optimum", "proven", "exact_s", "heuristic",
-                "approx", "lower_bound", "naive"):
+    for key in (
+        "terrain",
+        "m",
+        "fov_deg",
+        "d",
+        "optimum",
+        "proven",
+        "exact_s",
+        "heuristic",
+        "approx",
+        "lower_bound",
+        "naive",
+    ):
         assert key in rows[0]
     for row in rows:
         optimum = float(row["optimum"])
