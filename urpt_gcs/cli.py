@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import click
 
 from urpt_gcs import __version__
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.mission import FIRMWARES, MissionSettings
+from urpt_gcs.link import DEFAULT_URL
+from urpt_gcs.mission import FIRMWARES, Mission, MissionSettings
 from urpt_gcs.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
@@ -24,6 +26,28 @@ def _fail(exc: UrptError) -> None:
     message = " ".join(str(exc).split())
     click.echo(f"urpt-gcs: error: {message}", err=True)
     sys.exit(1)
+
+
+def _upload_and_report(
+    mission: Mission, url: str, retries: int, timeout_s: float, quiet: bool
+) -> None:
+    """Upload with a verified read-back; one line on success, exit 1 on failure."""
+    from urpt_gcs.link import upload
+
+    progress = (lambda msg: click.echo(f"... {msg}", err=True)) if sys.stderr.isatty() else None
+    try:
+        report = upload(mission, url, retries=retries, timeout_s=timeout_s, progress=progress)
+    except UrptError as exc:
+        _fail(exc)
+        return
+    for warning in report.warnings:
+        click.echo(f"urpt-gcs: warning: {warning}", err=True)
+    if not quiet:
+        tries = f"{report.attempts} attempts" if report.attempts > 1 else "1 attempt"
+        click.echo(
+            f"uploaded {report.items} items to {report.url} ({report.autopilot}); read back "
+            f"identical in {report.elapsed_s:.2f} s ({tries})"
+        )
 
 
 def _parse_home(text: str | None) -> tuple[float, float] | None:
@@ -140,6 +164,22 @@ def main() -> None:
     default=None,
     help="Also write the planning instance as a GTSPLIB file (EUC_2D, centimetres).",
 )
+@click.option(
+    "--upload", "do_upload", is_flag=True, help="Upload the mission and verify its read-back."
+)
+@click.option(
+    "--connect",
+    default=DEFAULT_URL,
+    show_default=True,
+    help="With --upload: MAVSDK connection string of the vehicle.",
+)
+@click.option(
+    "--retries",
+    type=int,
+    default=3,
+    show_default=True,
+    help="With --upload: whole uploads tried again after a failure.",
+)
 def plan_command(
     dem: str,
     targets: str,
@@ -163,6 +203,9 @@ def plan_command(
     as_json: bool,
     quiet: bool,
     export_gtsp: Path | None,
+    do_upload: bool,
+    connect: str,
+    retries: int,
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
     from urpt_gcs.planner import plan
@@ -208,6 +251,14 @@ def plan_command(
         click.echo(json.dumps(data, indent=2))
     elif not quiet:
         click.echo(summary_text(data))
+    if do_upload:
+        if len(result.missions) > 1:
+            click.echo(
+                f"uploading sortie 1 of {len(result.missions)}; upload the others with "
+                "urpt-gcs upload after each landing",
+                err=True,
+            )
+        _upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json)
 
 
 @main.command("demo-site")
@@ -314,3 +365,189 @@ def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) ->
         _fail(exc)
         return
     click.echo(format_tables(rows))
+
+
+@main.command("upload")
+@click.argument("mission_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.option(
+    "--connect",
+    default=DEFAULT_URL,
+    show_default=True,
+    help="MAVSDK connection string (udpin://, udpout://, tcpout://, serial://).",
+)
+@click.option(
+    "--retries",
+    type=int,
+    default=3,
+    show_default=True,
+    help="Whole uploads tried again after a timeout, refusal or differing read-back.",
+)
+@click.option(
+    "--timeout",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Seconds to wait for the autopilot's heartbeat.",
+)
+def upload_command(mission_file: Path, connect: str, retries: int, timeout: float) -> None:
+    """Upload a .plan (or .waypoints, as ArduPilot) and verify the vehicle reads it back."""
+    from urpt_gcs.sitl.replay import read_mission
+
+    try:
+        mission = read_mission(mission_file)
+    except UrptError as exc:
+        _fail(exc)
+        return
+    _upload_and_report(mission, connect, retries, timeout, quiet=False)
+
+
+@main.group("sitl", invoke_without_command=True)
+@click.option(
+    "--listen",
+    default="udpout://127.0.0.1:14550",
+    show_default=True,
+    help="The simulator's end: udpout://HOST:PORT, udpin://HOST:PORT or tcpin://HOST:PORT.",
+)
+@click.option("--home", default=None, metavar="LAT,LON,ALT", help="Home; ALT in m AMSL.")
+@click.option("--speedup", type=float, default=1.0, show_default=True, help="Simulated s per s.")
+@click.option("--loss", type=float, default=0.0, show_default=True, help="Packet loss each way.")
+@click.option("--latency", type=float, default=0.0, show_default=True, help="Delay each way, ms.")
+@click.option(
+    "--drop-after",
+    type=int,
+    default=None,
+    help="Go silent for a few seconds after receiving this many mission items (once).",
+)
+@click.option("--px4", is_flag=True, help="Identify as PX4: no home item at seq 0.")
+@click.option(
+    "--capacity", type=int, default=700, show_default=True, help="Most mission items held."
+)
+@click.option(
+    "--boot",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Seconds after start that uploads and arming are refused, as ArduPilot does.",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the packet loss.")
+@click.pass_context
+def sitl_group(
+    ctx: click.Context,
+    listen: str,
+    home: str | None,
+    speedup: float,
+    loss: float,
+    latency: float,
+    drop_after: int | None,
+    px4: bool,
+    capacity: int,
+    boot: float,
+    seed: int,
+) -> None:
+    """Run a simulated ArduCopter on a MAVLink connection until Ctrl-C.
+
+    `urpt-gcs sitl replay` flies a mission on one and checks it against the terrain.
+    """
+    if ctx.invoked_subcommand is not None:
+        return
+    from urpt_gcs.sitl import SitlServer, VehicleSettings, parse_home
+
+    try:
+        settings = VehicleSettings(
+            speedup=speedup,
+            loss=loss,
+            latency_ms=latency,
+            drop_after=drop_after,
+            px4=px4,
+            capacity=capacity,
+            boot_s=boot,
+            seed=seed,
+        )
+        if home is not None:
+            settings = replace(settings, home=parse_home(home))
+        server = SitlServer(settings, listen)
+        where = settings.home
+        click.echo(
+            f"simulated {'PX4' if px4 else 'ArduCopter'} quadrotor on {listen}, home "
+            f"{where.lat_deg:.7f},{where.lon_deg:.7f} at {where.amsl_m:g} m, speed-up "
+            f"{speedup:g}x; Ctrl-C stops it",
+            err=True,
+        )
+        server.serve()
+    except UrptError as exc:
+        _fail(exc)
+    except KeyboardInterrupt:
+        click.echo("simulator stopped", err=True)
+
+
+@sitl_group.command("replay")
+@click.option("--dem", "dem", required=True, type=click.Path(path_type=Path), help="DSM GeoTIFF.")
+@click.option(
+    "--targets", "targets", required=True, type=click.Path(path_type=Path), help="Target file."
+)
+@click.option(
+    "--plan",
+    "plan_file",
+    required=True,
+    type=click.Path(path_type=Path),
+    help="Mission to fly: .plan or .waypoints.",
+)
+@click.option("--speedup", type=float, default=50.0, show_default=True, help="Simulated s per s.")
+@click.option(
+    "--fov", type=float, default=30.0, show_default=True, help="Camera half-angle, degrees."
+)
+@click.option(
+    "--min-clearance",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Least height above the terrain on cruise legs, m.",
+)
+@click.option(
+    "--takeoff",
+    type=click.Choice(["auto-options", "guided"]),
+    default="auto-options",
+    show_default=True,
+    help="Take off in AUTO (AUTO_OPTIONS=2) or in GUIDED before AUTO.",
+)
+@click.option("--timeout", type=float, default=None, help="Wall-clock limit for the flight, s.")
+@click.option(
+    "--connect",
+    default=None,
+    help="Fly on this vehicle (e.g. ArduPilot SITL, tcpout://127.0.0.1:5760) instead of the "
+    "built-in simulator; give its --speedup.",
+)
+def sitl_replay_command(
+    dem: Path,
+    targets: Path,
+    plan_file: Path,
+    speedup: float,
+    fov: float,
+    min_clearance: float,
+    takeoff: str,
+    timeout: float | None,
+    connect: str | None,
+) -> None:
+    """Fly a mission on the simulated copter via MAVSDK; check photos and clearance on the DEM."""
+    from urpt_gcs.sitl.judge import report_text
+    from urpt_gcs.sitl.replay import ReplaySettings, replay
+
+    progress = (lambda msg: click.echo(f"... {msg}", err=True)) if sys.stderr.isatty() else None
+    try:
+        settings = ReplaySettings(
+            speedup=speedup,
+            fov_deg=fov,
+            min_clearance_m=min_clearance,
+            takeoff=takeoff,  # type: ignore[arg-type]  # click.Choice checked it
+            timeout_s=timeout,
+            connect=connect,
+        )
+        report = replay(dem, targets, plan_file, settings, progress)
+    except UrptError as exc:
+        _fail(exc)
+        return
+    click.echo(report_text(report))
+    if not report.ok:
+        more = f" (and {len(report.problems) - 1} more)" if len(report.problems) > 1 else ""
+        click.echo(f"urpt-gcs: error: replay failed: {report.problems[0]}{more}", err=True)
+        sys.exit(1)

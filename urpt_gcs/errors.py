@@ -14,6 +14,8 @@ The tree::
     ├── MissionFileError (ValueError) a .plan or .waypoints file cannot be used
     ├── OutputError (OSError)        an output cannot be written
     └── LinkError (ConnectionError)  the vehicle cannot be reached or refused the mission
+        ├── MissionRejected           the vehicle answered MISSION_ACK with a refusal
+        └── LinkTimeout               the vehicle stopped answering (in urpt_gcs.link)
 """
 
 from __future__ import annotations

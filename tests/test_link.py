@@ -1,0 +1,312 @@
+"""Upload with read-back: the real MAVSDK on one side, the simulated vehicle on the other.
+
+Every test here goes over loopback UDP through MAVSDK 4.x's ``mission_raw`` to a
+:class:`~urpt_gcs.sitl.SitlServer`; what the vehicle then holds is read from the simulator
+itself, so a success reported by the uploader is checked against the vehicle's real state.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import pytest
+from click.testing import CliRunner
+from conftest import DEMO
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from simulated import DEMO_PLAN, demo_mission, simulated
+
+from urpt_gcs.cli import main
+from urpt_gcs.errors import LinkError
+from urpt_gcs.link import MissionRejected, upload
+from urpt_gcs.mission import GeoPoint, Mission, MissionItem, MissionSettings, build_mission
+from urpt_gcs.readback import WireItem, compare, wire_items
+from urpt_gcs.sitl.server import SitlServer
+from urpt_gcs.sitl.store import Item, ardupilot_stored
+
+WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
+RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+
+
+def held(server: SitlServer) -> list[WireItem]:
+    """What the simulated vehicle holds, as a download returns it."""
+    return [
+        WireItem(seq, i.frame, i.command, 0, i.autocontinue, *i.params, i.x, i.y, i.z)
+        for seq, i in enumerate(server.vehicle.store.items())
+    ]
+
+
+def assert_holds(server: SitlServer, mission: Mission) -> None:
+    sent = wire_items(mission)
+    got = held(server)
+    assert compare(sent, got, mission.firmware).equal
+    waypoints = [(w.x, w.y) for w in sent if w.command == WAYPOINT]
+    assert [(w.x, w.y) for w in got if w.command == WAYPOINT][-len(waypoints) :] == waypoints
+
+
+# --- the demo mission ------------------------------------------------------------------------
+
+
+def test_demo_mission_uploads_and_reads_back_identical() -> None:
+    mission = demo_mission()
+    with simulated(mission) as (server, url):
+        started = time.monotonic()
+        report = upload(mission, url)
+        total = time.monotonic() - started
+        print(f"\ndemo upload, no loss: {report.elapsed_s:.3f} s ({total:.2f} s with connect)")
+        assert_holds(server, mission)
+    assert report.attempts == 1
+    assert report.items == len(mission.items) + 1
+    assert report.autopilot == report.firmware == "ardupilot"
+    assert report.vehicle_home is not None
+    assert report.vehicle_home.lat_deg == pytest.approx(mission.home.lat_deg, abs=1e-7)
+    assert report.warnings == ()
+
+
+def test_plan_then_upload_from_the_command_line(tmp_path) -> None:
+    with simulated(demo_mission()) as (server, url):
+        result = CliRunner().invoke(
+            main,
+            [
+                "plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml"),
+                "--out", str(tmp_path / "out"), "--time-limit", "1", "--no-map", "--quiet",
+                "--upload", "--connect", url,
+            ],
+        )  # fmt: skip
+        assert result.exit_code == 0, result.output + result.stderr
+        assert "read back identical" not in result.output  # --quiet
+        planned = (tmp_path / "out" / "mission.plan").read_text()
+        from urpt_gcs.formats import read_plan
+
+        assert_holds(server, read_plan(planned, "mission.plan"))
+
+
+def test_upload_command_prints_one_line() -> None:
+    with simulated(demo_mission()) as (_server, url):
+        result = CliRunner().invoke(main, ["upload", str(DEMO_PLAN), "--connect", url])
+    assert result.exit_code == 0, result.stderr
+    assert result.output.startswith("uploaded 28 items to ")
+    assert "read back identical" in result.output
+
+
+def test_no_vehicle_is_one_clear_line() -> None:
+    result = CliRunner().invoke(
+        main, ["upload", str(DEMO_PLAN), "--connect", "udpin://127.0.0.1:9", "--timeout", "1"]
+    )
+    assert result.exit_code == 1
+    assert result.stderr.startswith("urpt-gcs: error: no autopilot heard on udpin://127.0.0.1:9")
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+# --- firmware conventions --------------------------------------------------------------------
+
+
+def test_px4_vehicle_gets_no_home_item() -> None:
+    ardupilot = demo_mission()
+    waypoints = [(i.params[4], i.params[5]) for i in ardupilot.items if i.command == WAYPOINT]
+    mission = build_mission(
+        ardupilot.home, waypoints, ardupilot.altitude_rel_m, MissionSettings(firmware="px4")
+    )
+    with simulated(mission, px4=True) as (server, url):
+        report = upload(mission, url)
+        store = server.vehicle.store
+        assert len(store) == len(mission.items)
+        assert store.read(0).command == mavlink.MAV_CMD_NAV_TAKEOFF
+        assert_holds(server, mission)
+    assert report.autopilot == "px4"
+    assert report.items == len(mission.items)
+    assert report.vehicle_home is None
+
+
+def test_mission_for_the_other_firmware_is_refused() -> None:
+    with simulated(px4=True) as (_server, url), pytest.raises(LinkError) as raised:
+        upload(demo_mission(), url)
+    assert "planned for ArduPilot but the vehicle" in str(raised.value)
+    assert "--firmware px4" in str(raised.value)
+
+
+# --- a bad link ------------------------------------------------------------------------------
+
+
+def test_lossy_link_ends_identical_or_clearly_failed() -> None:
+    mission = demo_mission()
+    with simulated(mission, loss=0.2, seed=3) as (server, url):
+        try:
+            report = upload(mission, url, retries=3)
+        except LinkError as exc:
+            message = str(exc)
+            assert "\n" not in message and message
+            print(f"\n20 % loss: failed cleanly: {message}")
+        else:
+            assert_holds(server, mission)
+            print(f"\n20 % loss: {report.elapsed_s:.1f} s, {report.attempts} attempt(s)")
+
+
+def test_corrupted_read_back_is_never_success() -> None:
+    mission = demo_mission()
+    with simulated(mission, corrupt_seq=5) as (_server, url), pytest.raises(LinkError) as raised:
+        upload(mission, url, retries=1)
+    message = str(raised.value)
+    assert "after 2 attempts" in message
+    assert "seq 5 (NAV_WAYPOINT): x (param5)" in message
+    assert "do not fly it" in message
+
+
+def test_link_dropped_mid_upload_is_retried() -> None:
+    mission = demo_mission()
+    messages: list[str] = []
+    with simulated(mission, drop_after=10, drop_s=3.0) as (server, url):
+        report = upload(mission, url, progress=messages.append)
+        assert_holds(server, mission)
+    assert report.attempts >= 2
+    assert any(m.startswith("retrying (") for m in messages)
+
+
+def test_link_dropped_without_retries_is_a_clear_error() -> None:
+    mission = demo_mission()
+    with (
+        simulated(mission, drop_after=10, drop_s=3.0) as (_server, url),
+        pytest.raises(LinkError) as raised,
+    ):
+        upload(mission, url, retries=0)
+    assert "not verified" in str(raised.value)
+    assert "partial mission" in str(raised.value)
+
+
+def test_latency_still_verifies() -> None:
+    mission = demo_mission()
+    with simulated(mission, latency_ms=40.0) as (server, url):
+        upload(mission, url)
+        assert_holds(server, mission)
+
+
+# --- the vehicle says no ---------------------------------------------------------------------
+
+
+def test_over_capacity_names_no_space() -> None:
+    mission = demo_mission()
+    with simulated(mission, capacity=10) as (server, url):
+        started = time.monotonic()
+        with pytest.raises(MissionRejected) as raised:
+            upload(mission, url)
+        assert time.monotonic() - started < 5.0, "a capacity refusal must not be retried"
+        assert len(server.vehicle.store) == 1  # nothing stored but home
+    assert raised.value.result == "MAV_MISSION_NO_SPACE"
+    assert raised.value.capacity == 10
+    assert "holds at most 10 items and the mission has 28" in str(raised.value)
+
+
+def test_refusal_after_boot_is_waited_out() -> None:
+    mission = demo_mission()
+    with simulated(mission, boot_s=2.5) as (server, url):
+        report = upload(mission, url, busy_wait_s=0.5)
+        assert_holds(server, mission)
+    assert report.attempts >= 2
+
+
+def _one_item_mission(item: MissionItem) -> Mission:
+    home = GeoPoint(47.3977420, 8.5455940, 488.0)
+    return Mission(home, (item,), "ardupilot", 20.0, 5.0, 5.0)
+
+
+@pytest.mark.parametrize(
+    ("frame", "params", "expected"),
+    [
+        (mavlink.MAV_FRAME_LOCAL_NED, (0, 0, 0, 0), "MAV_MISSION_UNSUPPORTED_FRAME"),
+        (RELATIVE, (math.nan, 0, 0, 0), "MAV_MISSION_INVALID_PARAM1"),
+    ],
+)
+def test_refusal_names_the_mission_ack(frame: int, params: tuple, expected: str) -> None:
+    item = MissionItem(WAYPOINT, frame, (*params, 47.3978, 8.5456, 20.0))
+    with simulated() as (_server, url), pytest.raises(MissionRejected) as raised:
+        upload(_one_item_mission(item), url)
+    assert raised.value.result == expected
+    assert raised.value.seq == 1
+    assert str(raised.value).startswith(f"{expected}: the vehicle on {url} refused mission")
+    assert "item seq 1 (NAV_WAYPOINT): correct it in the plan" in str(raised.value)
+
+
+def test_nan_param4_of_a_waypoint_reads_back_as_zero_and_counts_as_equal() -> None:
+    item = MissionItem(WAYPOINT, RELATIVE, (2.0, 0, 0, math.nan, 47.3978, 8.5456, 20.0))
+    mission = _one_item_mission(item)
+    with simulated() as (server, url):
+        upload(mission, url)
+        assert server.vehicle.store.read(1).param4 == 0.0
+
+
+# --- the comparison itself -------------------------------------------------------------------
+
+
+def _item(**changes: object) -> WireItem:
+    base = WireItem(1, RELATIVE, WAYPOINT, 0, 1, 2.0, 0.0, 0.0, 0.0, 476888434, 94238428, 68.87)
+    return replace(base, **changes)  # type: ignore[arg-type]
+
+
+HOME = WireItem(0, 0, WAYPOINT, 1, 1, 0.0, 0.0, 0.0, 0.0, 476887616, 94230907, 411.92)
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"x": 476888435},
+        {"y": 94238427},
+        {"z": 68.85},
+        {"param1": 3.0},
+        {"command": mavlink.MAV_CMD_NAV_LOITER_UNLIM},
+        {"frame": mavlink.MAV_FRAME_GLOBAL},
+        {"autocontinue": 0},
+    ],
+)
+def test_every_field_that_matters_is_compared(changes: dict[str, object]) -> None:
+    check = compare([HOME, _item()], [HOME, _item(**changes)], "ardupilot")
+    assert not check.equal
+    assert check.mismatches[0].startswith("seq 1 (NAV_WAYPOINT)")
+
+
+def test_what_ardupilot_normalises_is_equal() -> None:
+    sent = [HOME, _item(frame=mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, param4=math.nan)]
+    vehicle_home = replace(HOME, current=0, x=476887000, z=410.0)
+    got = [vehicle_home, _item(param4=0.0, z=68.86999)]
+    assert compare(sent, got, "ardupilot").equal
+    assert not compare(sent, got, "px4").equal
+    assert not compare(sent, got[:1], "ardupilot").equal
+
+
+def test_a_truncated_hold_is_accepted_with_a_warning() -> None:
+    check = compare([HOME, _item(param1=2.5)], [HOME, _item(param1=2.0)], "ardupilot")
+    assert check.equal
+    assert check.warnings == ("seq 1 (NAV_WAYPOINT): the vehicle keeps param1 2.5 as 2",)
+
+
+coordinates = st.tuples(
+    st.integers(-900_000_000, 900_000_000), st.integers(-1_800_000_000, 1_800_000_000)
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    xy=coordinates,
+    z=st.floats(-500.0, 8000.0),
+    hold=st.floats(0.0, 3600.0),
+    frame=st.sampled_from([RELATIVE, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0, 5]),
+    nudge=st.sampled_from(["x", "y", "z", None]),
+)
+def test_simulator_storage_passes_and_any_nudge_fails(
+    xy: tuple[int, int], z: float, hold: float, frame: int, nudge: str | None
+) -> None:
+    """The simulator's model of ArduPilot's storage and the comparison agree; a moved
+    waypoint never passes."""
+    sent = _item(x=xy[0], y=xy[1], z=z, param1=hold, frame=frame)
+    stored = ardupilot_stored(Item(WAYPOINT, frame, hold, 0.0, 0.0, 0.0, xy[0], xy[1], z))
+    got = WireItem(1, stored.frame, WAYPOINT, 0, 1, *stored.params, stored.x, stored.y, stored.z)
+    if nudge == "x":
+        got = replace(got, x=got.x + 1)
+    elif nudge == "y":
+        got = replace(got, y=got.y - 1)
+    elif nudge == "z":
+        got = replace(got, z=got.z + 0.05)  # beyond the 1 cm tolerance of either form
+    check = compare([HOME, sent], [HOME, got], "ardupilot")
+    assert check.equal == (nudge is None)

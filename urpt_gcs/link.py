@@ -1,0 +1,371 @@
+"""The drone link: put a mission on the vehicle and prove it holds exactly that mission.
+
+:func:`upload` connects (MAVSDK 4.x, ``mission_raw``), checks the autopilot against the
+mission's firmware, uploads, downloads the mission back and compares it item by item
+(:mod:`urpt_gcs.readback`). A timeout, a lost link or a read-back that differs restarts the
+whole upload, up to ``retries`` more times; success is reported only for a verified read-back.
+
+The uploader is written against :class:`VehicleLink`; the real one is
+:class:`urpt_gcs.mavsdk_link.MavsdkLink`, loaded only when a link is opened.
+Errors are :class:`~urpt_gcs.errors.LinkError`; a refusal by the vehicle is
+:class:`MissionRejected`, which names the MISSION_ACK result (``MAV_MISSION_NO_SPACE``...).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+from urpt_gcs.errors import LinkError, SettingsError
+from urpt_gcs.mission import Firmware, GeoPoint, Mission
+from urpt_gcs.readback import WireItem, command_name, compare, wire_items
+
+DEFAULT_URL = "udpin://0.0.0.0:14550"
+AutopilotKind = Literal["ardupilot", "px4", "unknown"]
+Progress = Callable[[str], None]
+_NAMES = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
+
+
+class MissionRejected(LinkError):
+    """The vehicle refused the mission.
+
+    ``result`` is the MAV_MISSION_RESULT name, ``seq`` the item it refused (when known),
+    ``capacity`` the most items it holds (when it said so).
+    """
+
+    def __init__(
+        self,
+        result: str,
+        detail: str = "",
+        capacity: int | None = None,
+        seq: int | None = None,
+    ) -> None:
+        super().__init__(f"{result}{': ' + detail if detail else ''}")
+        self.result = result
+        self.capacity = capacity
+        self.seq = seq
+
+
+class LinkTimeout(LinkError):
+    """A transfer got no answer in time (a lossy or dropped link)."""
+
+
+@dataclass(frozen=True, slots=True)
+class UploadSettings:
+    """How hard :func:`upload` tries.
+
+    Attributes
+    ----------
+    retries
+        Whole uploads tried again after the first fails (timeout, refusal while the vehicle
+        boots, read-back that differs).
+    timeout_s
+        Wait this long for the autopilot's heartbeat (also to come back after a drop).
+    transfer_timeout_s
+        Give one upload or download up after this long.
+    busy_wait_s
+        After MAV_MISSION_NO_SPACE without a capacity message (ArduPilot still starting), wait
+        this long times the attempt number before trying again.
+    """
+
+    retries: int = 3
+    timeout_s: float = 10.0
+    transfer_timeout_s: float = 30.0
+    busy_wait_s: float = 3.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.retries <= 100:
+            raise SettingsError(f"--retries {self.retries} is out of range; use 0 to 100")
+        for name, value in (
+            ("--timeout", self.timeout_s),
+            ("transfer timeout", self.transfer_timeout_s),
+            ("busy wait", self.busy_wait_s),
+        ):
+            if not (math.isfinite(value) and 0.0 <= value <= 3600.0):
+                raise SettingsError(f"{name} {value} s is out of range; use 0 to 3600 s")
+
+
+@dataclass(frozen=True, slots=True)
+class UploadReport:
+    """A verified upload: the vehicle holds the mission, item for item."""
+
+    url: str
+    autopilot: AutopilotKind
+    firmware: Firmware
+    items: int
+    attempts: int
+    elapsed_s: float
+    vehicle_home: GeoPoint | None
+    warnings: tuple[str, ...] = field(default=())
+
+
+class VehicleLink(Protocol):
+    """What the uploader needs from a connected vehicle."""
+
+    url: str
+
+    async def autopilot(self) -> AutopilotKind:
+        """The autopilot the vehicle's heartbeat names."""
+        ...
+
+    async def wait_connected(self, timeout_s: float) -> None:
+        """Return once the vehicle is heard; LinkError after ``timeout_s``."""
+        ...
+
+    async def upload(self, items: Sequence[WireItem], progress: Callable[[float], None]) -> None:
+        """Send a mission; MissionRejected or LinkTimeout if it does not go through."""
+        ...
+
+    async def download(self) -> list[WireItem]:
+        """Read the vehicle's mission back; LinkTimeout if it does not answer."""
+        ...
+
+    async def cancel(self) -> None:
+        """Abandon a transfer still running."""
+        ...
+
+
+async def upload_verified(
+    link: VehicleLink,
+    mission: Mission,
+    settings: UploadSettings | None = None,
+    progress: Progress | None = None,
+) -> UploadReport:
+    """Upload ``mission`` over ``link`` until a download reads it back equal.
+
+    Parameters
+    ----------
+    link
+        A connected vehicle.
+    mission
+        The mission; its firmware decides the home item at seq 0.
+    settings
+        Retries and timeouts; defaults if omitted.
+    progress
+        Called with a short message as the upload goes on.
+
+    Returns
+    -------
+    UploadReport
+        Only when the vehicle holds the mission.
+
+    Raises
+    ------
+    LinkError
+        If the vehicle refuses the mission (:class:`MissionRejected`), runs another firmware,
+        or no attempt ends in a matching read-back.
+    """
+    settings = settings or UploadSettings()
+    say = progress or (lambda _msg: None)
+    started = time.monotonic()
+    autopilot = await link.autopilot()
+    warnings: list[str] = []
+    if autopilot == "unknown":
+        warnings.append(
+            f"the vehicle does not say whether it runs ArduPilot or PX4: uploaded with "
+            f"{_NAMES[mission.firmware]}'s conventions, as the mission was planned"
+        )
+    elif autopilot != mission.firmware:
+        raise LinkError(
+            f"the mission was planned for {_NAMES[mission.firmware]} but the vehicle on "
+            f"{link.url} runs {_NAMES[autopilot]}: plan it again with --firmware {autopilot}"
+        )
+    items = wire_items(mission)
+    attempts = settings.retries + 1
+    problem = ""
+    refusal: MissionRejected | None = None
+    for attempt in range(1, attempts + 1):
+        if attempt > 1:
+            say(f"retrying ({problem}): attempt {attempt} of {attempts}")
+        refusal = None
+        try:
+            got = await _attempt(link, items, settings, say)
+        except LinkTimeout as exc:
+            problem = str(exc)
+            continue
+        except MissionRejected as exc:
+            _check_refusal(exc, link.url, items)
+            refusal, problem = exc, f"the vehicle refused it with {exc}"
+            if attempt < attempts:
+                await asyncio.sleep(settings.busy_wait_s * attempt)
+            continue
+        check = compare(items, got, mission.firmware)
+        if check.equal:
+            warnings.extend(check.warnings)
+            home = _vehicle_home(got) if mission.firmware == "ardupilot" else None
+            warnings.extend(_home_warnings(mission, home))
+            return UploadReport(
+                url=link.url,
+                autopilot=autopilot,
+                firmware=mission.firmware,
+                items=len(items),
+                attempts=attempt,
+                elapsed_s=time.monotonic() - started,
+                vehicle_home=home,
+                warnings=tuple(warnings),
+            )
+        more = f" (and {len(check.mismatches) - 1} more)" if len(check.mismatches) > 1 else ""
+        problem = f"read-back differs: {check.mismatches[0]}{more}"
+    if refusal is not None:
+        cause = (
+            f"it may have no room for {len(items)} items, or still be starting (ArduPilot "
+            "refuses uploads for about ten seconds after boot): wait and try again"
+            if refusal.result == "MAV_MISSION_NO_SPACE"
+            else "another ground station may be uploading to it: stop that and try again"
+        )
+        raise MissionRejected(
+            refusal.result,
+            f"the vehicle on {link.url} refused the mission on all {attempts} attempts: {cause}",
+        )
+    raise LinkError(
+        f"mission not verified on {link.url} after {attempts} attempts: {problem}; the "
+        "vehicle may hold a partial mission: do not fly it"
+    )
+
+
+# Refusals that can come from the link or a passing state, not from the mission.
+RETRYABLE = frozenset(
+    {
+        "MAV_MISSION_NO_SPACE",  # ArduPilot still starting (a real capacity limit says so)
+        "MAV_MISSION_DENIED",  # another ground station is uploading
+        "MAV_MISSION_OPERATION_CANCELLED",  # the vehicle gave up waiting for an item
+        "MAV_MISSION_INVALID_SEQUENCE",  # an item arrived twice or late
+    }
+)
+
+
+def _check_refusal(exc: MissionRejected, url: str, items: Sequence[WireItem]) -> None:
+    """Raise at once for a refusal that trying again cannot cure."""
+    if exc.result == "MAV_MISSION_NO_SPACE" and exc.capacity is not None:
+        raise MissionRejected(
+            exc.result,
+            f"the vehicle on {url} holds at most {exc.capacity} items and the mission has "
+            f"{len(items)}: plan fewer targets or split the mission",
+            exc.capacity,
+        ) from None
+    if exc.result in RETRYABLE:
+        return
+    where = "the mission"
+    if exc.seq is not None and 0 <= exc.seq < len(items):
+        where = f"mission item seq {exc.seq} ({command_name(items[exc.seq].command)})"
+    raise MissionRejected(
+        exc.result,
+        f"the vehicle on {url} refused {where}: correct it in the plan and upload again",
+        seq=exc.seq,
+    ) from None
+
+
+async def _attempt(
+    link: VehicleLink, items: Sequence[WireItem], settings: UploadSettings, say: Progress
+) -> list[WireItem]:
+    shown = [-1]
+
+    def on_progress(fraction: float) -> None:
+        if not math.isfinite(fraction):
+            return  # MAVSDK's final SUCCESS carries no progress
+        tenth = int(min(max(fraction, 0.0), 1.0) * 10)
+        if tenth > shown[0]:
+            shown[0] = tenth
+            say(f"uploading {len(items)} items: {tenth * 10}%")
+
+    await link.wait_connected(settings.timeout_s)
+    try:
+        await asyncio.wait_for(link.upload(items, on_progress), settings.transfer_timeout_s)
+        say("reading the mission back")
+        return await asyncio.wait_for(link.download(), settings.transfer_timeout_s)
+    except asyncio.TimeoutError:
+        await link.cancel()
+        raise LinkTimeout(f"transfer took over {settings.transfer_timeout_s:g} s") from None
+
+
+def _vehicle_home(got: Sequence[WireItem]) -> GeoPoint | None:
+    if not got:
+        return None
+    home = got[0]
+    try:
+        return GeoPoint(home.x * 1e-7, home.y * 1e-7, float(home.z))
+    except SettingsError:
+        return None
+
+
+def _home_warnings(mission: Mission, home: GeoPoint | None) -> list[str]:
+    if home is None or (home.lat_deg == 0.0 and home.lon_deg == 0.0):
+        return []
+    planned = mission.home
+    north = math.radians(home.lat_deg - planned.lat_deg) * 6_371_000.0
+    east = (
+        math.radians(home.lon_deg - planned.lon_deg)
+        * 6_371_000.0
+        * math.cos(math.radians(planned.lat_deg))
+    )
+    distance = math.hypot(north, east)
+    if distance <= 10.0:
+        return []
+    return [
+        f"the vehicle's home is {distance:.0f} m from the planned home: altitudes are relative "
+        "to the home the vehicle sets when it arms, so arm it at the planned take-off point"
+    ]
+
+
+async def upload_async(
+    mission: Mission,
+    url: str = DEFAULT_URL,
+    settings: UploadSettings | None = None,
+    progress: Progress | None = None,
+) -> UploadReport:
+    """:func:`upload` for a caller already inside an event loop."""
+    settings = settings or UploadSettings()
+    say = progress or (lambda _msg: None)
+    from urpt_gcs.mavsdk_link import connect
+
+    say(f"waiting for an autopilot on {url}")
+    async with connect(url, settings.timeout_s) as link:
+        return await upload_verified(link, mission, settings, progress)
+
+
+def upload(
+    mission: Mission,
+    url: str = DEFAULT_URL,
+    retries: int = 3,
+    timeout_s: float = 10.0,
+    progress: Progress | None = None,
+    *,
+    transfer_timeout_s: float = 30.0,
+    busy_wait_s: float = 3.0,
+) -> UploadReport:
+    """Upload a mission and verify the vehicle's read-back.
+
+    Parameters
+    ----------
+    mission
+        The mission to put on the vehicle.
+    url
+        MAVSDK connection string, e.g. ``udpin://0.0.0.0:14550`` (telemetry radio or
+        MAVProxy forwarding), ``tcpout://127.0.0.1:5760`` (ArduPilot SITL),
+        ``serial:///dev/ttyACM0:57600``.
+    retries
+        Whole uploads tried again after the first fails.
+    timeout_s
+        How long to wait for the autopilot's heartbeat.
+    progress
+        Called with a short message at each step.
+    transfer_timeout_s, busy_wait_s
+        See :class:`UploadSettings`.
+
+    Returns
+    -------
+    UploadReport
+        Only when the read-back matches.
+
+    Raises
+    ------
+    LinkError
+        With a one-line reason: no vehicle, wrong firmware, a refusal naming the MISSION_ACK
+        result, or no verified read-back after every retry.
+    """
+    settings = UploadSettings(retries, timeout_s, transfer_timeout_s, busy_wait_s)
+    return asyncio.run(upload_async(mission, url, settings, progress))

@@ -1,0 +1,219 @@
+"""MAVSDK 4.x as the drone link: :class:`MavsdkLink`, a :class:`~urpt_gcs.link.VehicleLink`.
+
+Missions go through ``mission_raw`` (items exactly as given, no home added or removed).
+``mavlink_direct`` watches MISSION_ACK and STATUSTEXT during an upload, so a refusal is
+reported with the vehicle's own MAV_MISSION_RESULT (MAVSDK folds several into one result) and
+ArduPilot's explanation ("Only 700 items are supported"). MAVSDK's log goes to the
+``urpt_gcs.mavsdk`` logger instead of the terminal.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections.abc import AsyncIterator, Callable, Sequence
+from contextlib import asynccontextmanager
+from typing import Any
+
+from mavsdk.asyncio.mavsdk import Configuration, Mavsdk
+from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+from mavsdk.autopilot import Autopilot
+from mavsdk.component_type import ComponentType
+from mavsdk.exceptions import MavsdkError
+from mavsdk.plugins.mission_raw import MissionItem as MavsdkItem
+from mavsdk.plugins.mission_raw import MissionPlan, MissionRawError, MissionRawResult
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from urpt_gcs.errors import LinkError
+from urpt_gcs.link import DEFAULT_URL, AutopilotKind, LinkTimeout, MissionRejected
+from urpt_gcs.readback import WireItem
+
+# ArduPilot sends its explanation (STATUSTEXT) just after the MISSION_ACK.
+REFUSAL_TEXT_WAIT_S = 0.3
+# When no MISSION_ACK was seen, the MAV_MISSION_RESULT behind MAVSDK's own result.
+_RESULT_ACK = {
+    MissionRawResult.TOO_MANY_MISSION_ITEMS: "MAV_MISSION_NO_SPACE",
+    MissionRawResult.DENIED: "MAV_MISSION_DENIED",
+    MissionRawResult.UNSUPPORTED: "MAV_MISSION_UNSUPPORTED",
+    MissionRawResult.INVALID_SEQUENCE: "MAV_MISSION_INVALID_SEQUENCE",
+    MissionRawResult.PROTOCOL_ERROR: "MAV_MISSION_ERROR",
+    MissionRawResult.TRANSFER_CANCELLED: "MAV_MISSION_OPERATION_CANCELLED",
+}
+_log = logging.getLogger("urpt_gcs.mavsdk")
+# MAVSDK's own log goes to this logger; without a handler configured by the application,
+# Python would print its warnings to stderr beside our one-line messages.
+_log.addHandler(logging.NullHandler())
+
+
+def _route_mavsdk_logs() -> None:
+    from mavsdk.logging import LogLevel, log_subscribe
+
+    levels = {
+        LogLevel.DEBUG: logging.DEBUG,
+        LogLevel.INFO: logging.INFO,
+        LogLevel.WARN: logging.WARNING,
+        LogLevel.ERROR: logging.ERROR,
+    }
+
+    def forward(level: Any, message: str, _file: str | None, _line: int) -> bool:
+        _log.log(levels.get(level, logging.INFO), "%s", message)
+        return True  # do not print: the operator sees our one-line messages
+
+    log_subscribe(forward)
+
+
+class MavsdkLink:
+    """A vehicle reached through MAVSDK 4.x (``mission_raw``, ``mavlink_direct``)."""
+
+    def __init__(self, sdk: Mavsdk, system: Any, url: str) -> None:
+        self.sdk = sdk
+        self.system = system
+        self.url = url
+        self.mission = MissionRawAsync(system)
+        self.direct = MavlinkDirectAsync(system)
+
+    async def autopilot(self) -> AutopilotKind:
+        """The autopilot named by the vehicle's HEARTBEAT (as MAVSDK recorded it)."""
+        kind = await self.system.autopilot_type()
+        if kind == Autopilot.ARDUPILOT:
+            return "ardupilot"
+        if kind == Autopilot.PX4:
+            return "px4"
+        return "unknown"
+
+    async def wait_connected(self, timeout_s: float) -> None:
+        """Return once MAVSDK hears the vehicle; LinkError after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while not await self.system.is_connected():
+            if time.monotonic() > deadline:
+                raise LinkError(f"lost the vehicle on {self.url} for more than {timeout_s:g} s")
+            await asyncio.sleep(0.1)
+
+    async def _watch(self, name: str, into: list[dict[str, Any]]) -> None:
+        messages = self.direct.subscribe_message(name)
+        try:
+            async for message in messages:
+                into.append(json.loads(message.fields_json))
+        finally:
+            await messages.aclose()
+
+    async def upload(self, items: Sequence[WireItem], progress: Callable[[float], None]) -> None:
+        """Upload with progress; MissionRejected names the vehicle's MISSION_ACK result."""
+        acks: list[dict[str, Any]] = []
+        texts: list[dict[str, Any]] = []
+        requests: list[dict[str, Any]] = []
+        watchers = [
+            asyncio.create_task(self._watch("MISSION_ACK", acks)),
+            asyncio.create_task(self._watch("STATUSTEXT", texts)),
+            asyncio.create_task(self._watch("MISSION_REQUEST", requests)),
+            asyncio.create_task(self._watch("MISSION_REQUEST_INT", requests)),
+        ]
+        await asyncio.sleep(0)  # let the subscriptions start before the first packet
+        plan = MissionPlan([_to_mavsdk(item) for item in items])
+        try:
+            async for _result, data in self.mission.upload_mission_with_progress(plan):
+                progress(float(data.progress))
+        except MissionRawError as exc:
+            if exc.result == MissionRawResult.TIMEOUT:
+                raise LinkTimeout(f"no answer from the vehicle on {self.url}") from None
+            await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
+            last = requests[-1].get("seq") if requests else None
+            raise _rejection(exc.result, acks, texts, last) from None
+        finally:
+            for watcher in watchers:
+                watcher.cancel()
+            await asyncio.gather(*watchers, return_exceptions=True)
+
+    async def download(self) -> list[WireItem]:
+        """The vehicle's mission, as MISSION_ITEM_INT items."""
+        try:
+            got = await self.mission.download_mission()
+        except MissionRawError as exc:
+            if exc.result == MissionRawResult.TIMEOUT:
+                raise LinkTimeout(f"no answer to the download on {self.url}") from None
+            raise LinkError(
+                f"the vehicle did not send its mission back ({exc.result.name})"
+            ) from None
+        return [_from_mavsdk(item) for item in got]
+
+    async def cancel(self) -> None:
+        """Cancel an upload or download MAVSDK may still be running."""
+        # Nothing may be running, which MAVSDK reports as an error: that is the wanted state.
+        with contextlib.suppress(MissionRawError):
+            await self.mission.cancel_mission_upload()
+        with contextlib.suppress(MissionRawError):
+            await self.mission.cancel_mission_download()
+
+
+def _to_mavsdk(item: WireItem) -> MavsdkItem:
+    return MavsdkItem(
+        item.seq, item.frame, item.command, item.current, item.autocontinue,
+        item.param1, item.param2, item.param3, item.param4, item.x, item.y, item.z,
+        item.mission_type,
+    )  # fmt: skip
+
+
+def _from_mavsdk(item: MavsdkItem) -> WireItem:
+    return WireItem(
+        item.seq, item.frame, item.command, item.current, item.autocontinue,
+        item.param1, item.param2, item.param3, item.param4, item.x, item.y, item.z,
+        item.mission_type,
+    )  # fmt: skip
+
+
+def _rejection(
+    result: MissionRawResult,
+    acks: list[dict[str, Any]],
+    texts: list[dict[str, Any]],
+    seq: int | None,
+) -> MissionRejected:
+    refusals = [ack["type"] for ack in acks if ack.get("type") != mavlink.MAV_MISSION_ACCEPTED]
+    entry = mavlink.enums["MAV_MISSION_RESULT"].get(refusals[-1]) if refusals else None
+    fallback = _RESULT_ACK.get(result, f"MAVSDK {result.name}")
+    name = entry.name if entry is not None else fallback
+    capacity = None
+    detail = ""
+    for text in texts:
+        words = str(text.get("text", "")).split()
+        # ArduPilot: "Only 700 items are supported" comes with a refusal over capacity.
+        if words[:1] == ["Only"] and words[2:5] == ["items", "are", "supported"]:
+            capacity = int(words[1]) if words[1].isdigit() else None
+            detail = " ".join(words)
+    return MissionRejected(name, detail, capacity, seq)
+
+
+@asynccontextmanager
+async def connect(url: str = DEFAULT_URL, timeout_s: float = 10.0) -> AsyncIterator[MavsdkLink]:
+    """Connect to the first autopilot heard on ``url`` (a MAVSDK connection string).
+
+    Raises
+    ------
+    LinkError
+        If the connection cannot be opened or no autopilot is heard within ``timeout_s``.
+    """
+    _route_mavsdk_logs()
+    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    async with Mavsdk(config) as sdk:
+        try:
+            await sdk.add_any_connection(url)
+        except MavsdkError as exc:
+            raise LinkError(
+                f"cannot open {url!r} ({exc}): use e.g. udpin://0.0.0.0:14550, "
+                "tcpout://127.0.0.1:5760 or serial:///dev/ttyACM0:57600"
+            ) from None
+        system = await sdk.first_autopilot(timeout_s=timeout_s)
+        if system is None:
+            raise LinkError(
+                f"no autopilot heard on {url} within {timeout_s:g} s: check that the vehicle "
+                "is powered, the radio or SITL is running, and the connection string"
+            )
+        link = MavsdkLink(sdk, system, url)
+        try:
+            yield link
+        finally:
+            link.mission.destroy()
+            link.direct.destroy()
