@@ -168,8 +168,34 @@ def test_bad_input(case: str, tmp_path: Path) -> None:
     assert sorted(p.name for p in BAD.iterdir()) == before, "a sample folder was written to"
 
 
+# name: (the file given to `urpt-gcs upload`, words the message must contain). The file is
+# checked before any connection is tried.
+UPLOAD_CASES: dict[str, tuple[str, list[str]]] = {
+    "upload_not_a_plan": ("upload_not_a_plan.plan", ["upload_not_a_plan.plan", "JSON"]),
+    "upload_unsupported_item": (
+        "upload_unsupported_item.plan",
+        ["upload_unsupported_item.plan", "ComplexItem", "flatten it"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(UPLOAD_CASES))
+def test_bad_upload_file(case: str) -> None:
+    name, words = UPLOAD_CASES[case]
+    result = CliRunner().invoke(
+        main, ["upload", str(BAD / name), "--connect", "udpin://127.0.0.1:14999"]
+    )
+    assert result.exit_code == 1, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("urpt-gcs: error: "), result.stderr
+    assert "Traceback" not in result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
 def test_every_sample_file_is_in_the_catalogue() -> None:
     named = {a for args, _ in PLAN_CASES.values() for a in args}
+    named |= {name for name, _ in UPLOAD_CASES.values()}
     used = {Path(a).name for a in named} | {a[1:] for a in named if a.startswith("@")}
     samples = {p.name for p in BAD.iterdir() if p.suffix != ".py"}
     # Samples the target reader's own tests cover in detail.
