@@ -13,11 +13,13 @@ from urpt_gcs.gtsp import Instance
 from urpt_gcs.solvers.approx import ApproxSolver
 from urpt_gcs.solvers.base import Solver, SolveSettings, Tour
 from urpt_gcs.solvers.exact import ExactSolver, exact_work
+from urpt_gcs.solvers.heuristic import HeuristicSolver
 from urpt_gcs.solvers.routing import RoutingSolver
 
 SOLVERS: dict[str, type[Solver]] = {
     "exact": ExactSolver,
     "approx": ApproxSolver,
+    "heuristic": HeuristicSolver,
     "ortools": RoutingSolver,
 }
 SOLVER_CHOICES = ("auto", *SOLVERS)

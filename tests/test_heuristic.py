@@ -1,0 +1,204 @@
+"""The GLNS-class heuristic: optimal on tiny instances, deterministic, within its time limit."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
+from urpt_gcs.solvers.clustered import cluster_instance
+from urpt_gcs.solvers.heuristic import HeuristicSolver, SearchSettings, solve_clustered, warm_up
+
+GTSPLIB = Path(__file__).resolve().parents[2] / "shared" / "bench" / "gtsplib"
+SETTINGS = SolveSettings(time_limit_s=10.0, seed=0)
+
+
+def random_instance(
+    seed: int,
+    m: int,
+    max_nodes: int,
+    *,
+    depot: bool = False,
+    asymmetric: bool = False,
+    overlap: bool = False,
+) -> Instance:
+    """Clustered points: each target's viewpoints scattered around it.
+
+    ``asymmetric`` adds a climbing cost (going up costs more than going down), which keeps
+    the triangle inequality; ``overlap`` lets some viewpoints also see another target.
+    """
+    rng = np.random.default_rng(seed)
+    centres = rng.random((m, 2)) * 100.0
+    sizes = rng.integers(1, max_nodes + 1, size=m)
+    owner = np.repeat(np.arange(m), sizes)
+    xy = centres[owner] + rng.normal(scale=8.0, size=(len(owner), 2))
+    n = len(xy)
+    covers = np.zeros((n, m), dtype=bool)
+    covers[np.arange(n), owner] = True
+    if overlap:
+        extra = rng.random(n) < 0.4
+        covers[np.flatnonzero(extra), rng.integers(0, m, size=int(extra.sum()))] = True
+    distance = euclidean_matrix(xy)
+    z = rng.random(n) * 30.0 if asymmetric else np.zeros(n)
+    distance = distance + 0.5 * np.maximum(z[None, :] - z[:, None], 0.0)
+    depot_distance = None
+    if depot:
+        to = np.hypot(*(xy - rng.random(2) * 100.0).T)
+        depot_distance = np.vstack([to + 0.5 * z, to])
+    return Instance(covers=covers, distance=distance, depot_distance=depot_distance)
+
+
+def brute_force_partition(instance: Instance) -> float:
+    """Every order of the targets times every choice of one viewpoint each (disjoint covers)."""
+    members = [np.flatnonzero(instance.covers[:, t]) for t in range(instance.n_targets)]
+    dist = instance.distance
+    best = math.inf
+    first = [] if instance.has_depot else [0]
+    rest = range(len(first), instance.n_targets)
+    for perm in itertools.permutations(rest):
+        order = [*first, *perm]
+        seq = np.array(list(itertools.product(*(members[t] for t in order))))
+        inner = dist[seq[:, :-1], seq[:, 1:]].sum(axis=1)
+        if instance.depot_distance is not None:
+            ends = instance.depot_distance[0, seq[:, 0]] + instance.depot_distance[1, seq[:, -1]]
+        else:
+            ends = dist[seq[:, -1], seq[:, 0]]
+        best = min(best, float((inner + ends).min()))
+    return best
+
+
+def brute_force_covers(instance: Instance) -> float:
+    """Every sequence of distinct viewpoints, of at most one per target, that sees all."""
+    best = math.inf
+    for length in range(1, instance.n_targets + 1):
+        for seq in itertools.permutations(range(instance.n_viewpoints), length):
+            if instance.covers[list(seq)].any(axis=0).all():
+                best = min(best, instance.tour_length(seq))
+    return best
+
+
+def check_tour(instance: Instance, length: float, expected: float) -> None:
+    assert length == pytest.approx(expected, rel=1e-9, abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize(
+    ("depot", "asymmetric"), [(False, False), (True, False), (False, True), (True, True)]
+)
+def test_equals_brute_force_on_disjoint_clusters(seed: int, depot: bool, asymmetric: bool) -> None:
+    instance = random_instance(seed, 6 if not depot else 5, 3, depot=depot, asymmetric=asymmetric)
+    tour = HeuristicSolver().solve(instance, SETTINGS)
+    assert tour.sees.any(axis=0).all()
+    assert len(set(tour.order)) == len(tour.order)
+    check_tour(instance, tour.length, brute_force_partition(instance))
+    assert tour.length == pytest.approx(instance.tour_length(tour.order))
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("depot", [False, True])
+def test_equals_brute_force_with_overlapping_covers(seed: int, depot: bool) -> None:
+    instance = random_instance(seed, 4, 2, depot=depot, asymmetric=seed % 2 == 1, overlap=True)
+    assert instance.n_viewpoints <= 8
+    tour = HeuristicSolver().solve(instance, SETTINGS)
+    assert tour.sees.any(axis=0).all()
+    check_tour(instance, tour.length, brute_force_covers(instance))
+
+
+@pytest.mark.parametrize(
+    "search",
+    [
+        SearchSettings(or_opt=True),
+        SearchSettings(two_opt=False, children=0, final_restarts=0),
+        SearchSettings(trials=1, restarts=2, neighbours=2),
+    ],
+    ids=["or-opt", "moves-only", "one-trial"],
+)
+@pytest.mark.parametrize("asymmetric", [False, True])
+def test_other_search_settings_stay_exact(search: SearchSettings, asymmetric: bool) -> None:
+    for seed in range(3):
+        instance = random_instance(20 + seed, 6, 3, asymmetric=asymmetric)
+        clustered = cluster_instance(instance)
+        cycle = solve_clustered(clustered, SETTINGS, search)
+        assert sorted(clustered.cluster[cycle].tolist()) == list(range(clustered.n_clusters))
+        check_tour(instance, clustered.cycle_length(cycle), brute_force_partition(instance))
+
+
+@pytest.mark.parametrize("depot", [False, True])
+@pytest.mark.parametrize("m", [0, 1, 2, 3])
+def test_tiny_instances(m: int, depot: bool) -> None:
+    if m == 0:
+        instance = Instance(
+            covers=np.zeros((2, 0), dtype=bool),
+            distance=np.zeros((2, 2)),
+            depot_distance=np.ones((2, 2)) if depot else None,
+        )
+        assert HeuristicSolver().solve(instance, SETTINGS).order == ()
+        return
+    instance = random_instance(m, m, 3, depot=depot, asymmetric=True)
+    tour = HeuristicSolver().solve(instance, SETTINGS)
+    check_tour(instance, tour.length, brute_force_partition(instance))
+
+
+def test_same_seed_same_tour() -> None:
+    instance = random_instance(7, 40, 4, asymmetric=True)
+    first = HeuristicSolver().solve(instance, SolveSettings(time_limit_s=30.0, seed=3))
+    again = HeuristicSolver().solve(instance, SolveSettings(time_limit_s=30.0, seed=3))
+    assert first.order == again.order
+    assert first.length == again.length
+
+
+def test_time_limit_is_honoured() -> None:
+    warm_up()
+    instance = random_instance(11, 200, 5)
+    limit = 0.5
+    started = time.perf_counter()
+    tour = HeuristicSolver().solve(instance, SolveSettings(time_limit_s=limit, seed=0))
+    wall = time.perf_counter() - started
+    assert tour.sees.any(axis=0).all()
+    assert tour.solve_s <= limit + 1.0
+    assert wall <= limit + 1.0
+
+
+def test_registered_and_reachable_through_solve() -> None:
+    assert SOLVERS["heuristic"] is HeuristicSolver
+    instance = random_instance(1, 5, 3, depot=True)
+    tour = solve(instance, "heuristic", SETTINGS)
+    assert tour.solver == "heuristic"
+    check_tour(instance, tour.length, brute_force_partition(instance))
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("trials", 0),
+        ("children", -1),
+        ("stall_per_cluster", 0.0),
+        ("temp_end", 2.0),
+        ("removal_fraction", 0.0),
+        ("removal_weights", (0.0, 0.0, 0.0, 0.0)),
+        ("insertion_weights", (1.0, -1.0, 1.0)),
+        ("neighbours", 0),
+    ],
+)
+def test_search_settings_are_validated(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=field):
+        SearchSettings(**{field: value})  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("name", "best_known"), [("11eil51", 174), ("31pr152", 51576), ("35ftv170", 1205)]
+)
+def test_reaches_best_known_on_gtsplib(name: str, best_known: int) -> None:
+    gtsplib = pytest.importorskip("urpt_gcs.formats.gtsplib")
+    path = GTSPLIB / f"{name}.gtsp"
+    if not path.exists():
+        pytest.skip(f"{path} is not beside the checkout")
+    instance = gtsplib.read_gtsplib(path)
+    tour = HeuristicSolver().solve(instance, SETTINGS)
+    assert tour.length == best_known
