@@ -4,6 +4,8 @@
 mission's firmware, uploads, downloads the mission back and compares it item by item
 (:mod:`urpt_gcs.readback`). A timeout, a lost link or a read-back that differs restarts the
 whole upload, up to ``retries`` more times; success is reported only for a verified read-back.
+Within one attempt, a read-back that gets no answer is read again, and an upload whose
+acceptance never came (:class:`UploadUnconfirmed`) is settled by the read-back alone.
 
 The uploader is written against :class:`VehicleLink`; the real one is
 :class:`urpt_gcs.mavsdk_link.MavsdkLink`, loaded only when a link is opened.
@@ -16,15 +18,16 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.mission import Firmware, GeoPoint, Mission
 from urpt_gcs.readback import WireItem, command_name, compare, wire_items
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
+READBACK_S_PER_ITEM = 1.0
 AutopilotKind = Literal["ardupilot", "px4", "unknown"]
 Progress = Callable[[str], None]
 _NAMES = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
@@ -54,6 +57,14 @@ class LinkTimeout(LinkError):
     """A transfer got no answer in time (a lossy or dropped link)."""
 
 
+class UploadUnconfirmed(LinkTimeout):
+    """The vehicle asked for every item, but its acceptance (MISSION_ACK) never came.
+
+    Most likely the acceptance was lost on the way: only a read-back can tell whether the
+    vehicle holds the mission.
+    """
+
+
 @dataclass(frozen=True, slots=True)
 class UploadSettings:
     """How hard :func:`upload` tries.
@@ -66,7 +77,12 @@ class UploadSettings:
     timeout_s
         Wait this long for the autopilot's heartbeat (also to come back after a drop).
     transfer_timeout_s
-        Give one upload or download up after this long.
+        Give an upload up when it has made no progress for this long (a whole upload over a
+        lossy link takes longer: ArduPilot asks for a lost item again only once a second), and
+        a read-back when it has not ended after this long plus a second per item.
+    readback_tries
+        Read the mission back this many times before giving the attempt up (downloads only
+        read, and MAVSDK gives a download up after five lost requests for one item).
     busy_wait_s
         After MAV_MISSION_NO_SPACE without a capacity message (ArduPilot still starting), wait
         this long times the attempt number before trying again.
@@ -76,10 +92,15 @@ class UploadSettings:
     timeout_s: float = 10.0
     transfer_timeout_s: float = 30.0
     busy_wait_s: float = 3.0
+    readback_tries: int = 3
 
     def __post_init__(self) -> None:
         if not 0 <= self.retries <= 100:
             raise SettingsError(f"--retries {self.retries} is out of range; use 0 to 100")
+        if not 1 <= self.readback_tries <= 100:
+            raise SettingsError(
+                f"read-back tries {self.readback_tries} is out of range; use 1 to 100"
+            )
         for name, value in (
             ("--timeout", self.timeout_s),
             ("transfer timeout", self.transfer_timeout_s),
@@ -117,7 +138,11 @@ class VehicleLink(Protocol):
         ...
 
     async def upload(self, items: Sequence[WireItem], progress: Callable[[float], None]) -> None:
-        """Send a mission; MissionRejected or LinkTimeout if it does not go through."""
+        """Send a mission; MissionRejected or LinkTimeout if it does not go through.
+
+        UploadUnconfirmed (a LinkTimeout) when every item was asked for but the vehicle's
+        acceptance did not come: the read-back then decides.
+        """
         ...
 
     async def download(self) -> list[WireItem]:
@@ -263,8 +288,10 @@ async def _attempt(
     link: VehicleLink, items: Sequence[WireItem], settings: UploadSettings, say: Progress
 ) -> list[WireItem]:
     shown = [-1]
+    heard = [time.monotonic()]
 
     def on_progress(fraction: float) -> None:
+        heard[0] = time.monotonic()
         if not math.isfinite(fraction):
             return  # MAVSDK's final SUCCESS carries no progress
         tenth = int(min(max(fraction, 0.0), 1.0) * 10)
@@ -274,12 +301,55 @@ async def _attempt(
 
     await link.wait_connected(settings.timeout_s)
     try:
-        await asyncio.wait_for(link.upload(items, on_progress), settings.transfer_timeout_s)
-        say("reading the mission back")
-        return await asyncio.wait_for(link.download(), settings.transfer_timeout_s)
-    except asyncio.TimeoutError:
+        await _until_stalled(link.upload(items, on_progress), heard, settings.transfer_timeout_s)
+    except UploadUnconfirmed as exc:
+        # Success still needs the read-back below to match item for item.
+        say(f"{exc}: reading the mission back to check")
+    except _Stalled:
         await link.cancel()
-        raise LinkTimeout(f"transfer took over {settings.transfer_timeout_s:g} s") from None
+        raise LinkTimeout(
+            f"the upload made no progress for {settings.transfer_timeout_s:g} s"
+        ) from None
+    # The link gives a read-back up itself when the vehicle stops answering; this limit only
+    # guards against a transfer that never ends. A read-back at 20 % loss takes about 0.3 s
+    # per item (MAVSDK asks again after 0.5 s), so a second per item leaves a wide margin.
+    limit_s = settings.transfer_timeout_s + READBACK_S_PER_ITEM * len(items)
+    problem = ""
+    for read in range(1, settings.readback_tries + 1):
+        say("reading the mission back" + (f" ({problem}): try {read}" if read > 1 else ""))
+        try:
+            return await asyncio.wait_for(link.download(), limit_s)
+        except asyncio.TimeoutError:
+            await link.cancel()
+            problem = f"the read-back took over {limit_s:g} s"
+        except LinkTimeout as exc:
+            problem = str(exc)
+    raise LinkTimeout(problem)
+
+
+class _Stalled(Exception):
+    """A transfer made no progress for too long."""
+
+
+async def _until_stalled(
+    transfer: Coroutine[Any, Any, None], heard: list[float], stall_s: float
+) -> None:
+    """Run ``transfer``, cancelled with _Stalled once ``heard[0]`` (its last progress) is
+    ``stall_s`` old."""
+    task = asyncio.ensure_future(transfer)
+    try:
+        while True:
+            left = heard[0] + stall_s - time.monotonic()
+            if left <= 0.0:
+                raise _Stalled
+            done, _pending = await asyncio.wait({task}, timeout=left)
+            if done:
+                task.result()
+                return
+    finally:
+        if not task.done():
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
 
 
 def _vehicle_home(got: Sequence[WireItem]) -> GeoPoint | None:

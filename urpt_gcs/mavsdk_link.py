@@ -5,12 +5,17 @@ Missions go through ``mission_raw`` (items exactly as given, no home added or re
 reported with the vehicle's own MAV_MISSION_RESULT (MAVSDK folds several into one result) and
 ArduPilot's explanation ("Only 700 items are supported"). MAVSDK's log goes to the
 ``urpt_gcs.mavsdk`` logger instead of the terminal.
+
+On a lossy link (see :data:`UPLOAD_TIMEOUT_S`) MAVSDK's answer timeout is raised for uploads,
+and an upload whose every item the vehicle asked for but whose acceptance never came is
+reported as :class:`~urpt_gcs.link.UploadUnconfirmed`, for the read-back to settle.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import ctypes
 import json
 import logging
 import time
@@ -29,11 +34,42 @@ from mavsdk.plugins.mission_raw import MissionPlan, MissionRawError, MissionRawR
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import LinkError
-from urpt_gcs.link import DEFAULT_URL, AutopilotKind, LinkTimeout, MissionRejected
+from urpt_gcs.link import (
+    DEFAULT_URL,
+    AutopilotKind,
+    LinkTimeout,
+    MissionRejected,
+    UploadUnconfirmed,
+)
 from urpt_gcs.readback import WireItem
 
 # ArduPilot sends its explanation (STATUSTEXT) just after the MISSION_ACK.
 REFUSAL_TEXT_WAIT_S = 0.3
+# How long MAVSDK waits for each answer in a mission transfer, set through the C library's
+# mavsdk_set_timeout_s (Mavsdk::set_timeout_s; the Python binding does not wrap it). MAVSDK
+# reads it when a transfer starts, and gives an item up once its sends and timeouts for that
+# item add up to five.
+#
+# Uploads: MAVSDK never resends an item by itself; it answers the vehicle's requests, and
+# ArduPilot asks again for a missing item only once a second (MissionItemProtocol::update:
+# 1000 ms plus its stream slow-down). At MAVSDK's default 0.5 s every second of waiting spent two
+# of the five, so an item lost twice failed the whole attempt: at 20 % loss each way 1 of 20
+# demo uploads verified, with 3 retries. At 2 s a timeout fires only when two of the vehicle's
+# re-requests in a row are lost, and the five go to real resends: 80 of 80 verified, 2 of them
+# on a second attempt (benchmarks/upload_loss.py). 1.5 s did as well in the simulator; 2 s
+# leaves room for the slow-down ArduPilot adds on a busy radio. A dead link is noticed after
+# 10 s instead of 2.5 s.
+UPLOAD_TIMEOUT_S = 2.0
+# Downloads: MAVSDK itself asks again for what does not come, so a short wait recovers faster;
+# this is MAVSDK's own default (Mavsdk::DEFAULT_TIMEOUT_S, seen as 0.5 s in its log).
+DOWNLOAD_TIMEOUT_S = 0.5
+# After the vehicle asked for the last item, an ArduPilot that did not get it asks again about
+# once a second; when nothing (no MISSION_ACK, no request) comes for this long, its acceptance
+# was most likely lost. Rather than wait out MAVSDK's five timeouts (10 s), stop and let the
+# read-back tell whether the vehicle holds the mission. Misjudging takes the last item and then
+# three re-requests in a row lost (about 0.2 % of uploads at 20 % loss each way; 0.8 % at 2.5 s,
+# where it was seen): the vehicle, still waiting, refuses the read-back and the attempt is lost.
+FINAL_ACK_WAIT_S = 3.5
 # When no MISSION_ACK was seen, the MAV_MISSION_RESULT behind MAVSDK's own result.
 _RESULT_ACK = {
     MissionRawResult.TOO_MANY_MISSION_ITEMS: "MAV_MISSION_NO_SPACE",
@@ -93,43 +129,100 @@ class MavsdkLink:
                 raise LinkError(f"lost the vehicle on {self.url} for more than {timeout_s:g} s")
             await asyncio.sleep(0.1)
 
-    async def _watch(self, name: str, into: list[dict[str, Any]]) -> None:
+    def set_transfer_timeout(self, seconds: float) -> None:
+        """Set MAVSDK's answer timeout for the transfers started from now on."""
+        # mavsdk.asyncio.Mavsdk wraps mavsdk.mavsdk.Mavsdk, which holds the C library and the
+        # handle (a mavsdk::Mavsdk*). C signature: void mavsdk_set_timeout_s(mavsdk_t, double).
+        try:
+            native = self.sdk._mavsdk
+            setter = native._lib.mavsdk_set_timeout_s
+            handle = native._handle
+        except AttributeError as exc:
+            _log.warning("cannot set MAVSDK's transfer timeout (%s): keeping its default", exc)
+            return
+        setter.argtypes = [ctypes.c_void_p, ctypes.c_double]
+        setter.restype = None
+        if handle:
+            setter(handle, ctypes.c_double(seconds))
+
+    async def _watch(self, name: str, into: list[tuple[float, dict[str, Any]]]) -> None:
         messages = self.direct.subscribe_message(name)
         try:
             async for message in messages:
-                into.append(json.loads(message.fields_json))
+                into.append((time.monotonic(), json.loads(message.fields_json)))
         finally:
             await messages.aclose()
 
+    async def _stop_when_acceptance_lost(
+        self,
+        last_seq: int,
+        requests: list[tuple[float, dict[str, Any]]],
+        acks: list[tuple[float, dict[str, Any]]],
+        gave_up: asyncio.Event,
+    ) -> None:
+        """Cancel MAVSDK's wait for a MISSION_ACK the vehicle has most likely sent and lost."""
+        while not acks:
+            await asyncio.sleep(0.1)
+            if not requests:
+                continue
+            asked_at, request = requests[-1]
+            if request.get("seq") == last_seq and time.monotonic() - asked_at > FINAL_ACK_WAIT_S:
+                gave_up.set()
+                # Nothing to cancel if MAVSDK finished meanwhile: the upload then ends on its own.
+                with contextlib.suppress(MissionRawError):
+                    await self.mission.cancel_mission_upload()
+                return
+
     async def upload(self, items: Sequence[WireItem], progress: Callable[[float], None]) -> None:
-        """Upload with progress; MissionRejected names the vehicle's MISSION_ACK result."""
-        acks: list[dict[str, Any]] = []
-        texts: list[dict[str, Any]] = []
-        requests: list[dict[str, Any]] = []
+        """Upload with progress; MissionRejected names the vehicle's MISSION_ACK result.
+
+        LinkTimeout when the vehicle stops answering; UploadUnconfirmed when it asked for every
+        item but its acceptance did not come.
+        """
+        acks: list[tuple[float, dict[str, Any]]] = []
+        texts: list[tuple[float, dict[str, Any]]] = []
+        requests: list[tuple[float, dict[str, Any]]] = []
         watchers = [
             asyncio.create_task(self._watch("MISSION_ACK", acks)),
             asyncio.create_task(self._watch("STATUSTEXT", texts)),
             asyncio.create_task(self._watch("MISSION_REQUEST", requests)),
             asyncio.create_task(self._watch("MISSION_REQUEST_INT", requests)),
         ]
+        gave_up = asyncio.Event()
+        watchers.append(
+            asyncio.create_task(
+                self._stop_when_acceptance_lost(len(items) - 1, requests, acks, gave_up)
+            )
+        )
         await asyncio.sleep(0)  # let the subscriptions start before the first packet
         plan = MissionPlan([_to_mavsdk(item) for item in items])
+        self.set_transfer_timeout(UPLOAD_TIMEOUT_S)
         try:
             async for _result, data in self.mission.upload_mission_with_progress(plan):
                 progress(float(data.progress))
         except MissionRawError as exc:
-            if exc.result == MissionRawResult.TIMEOUT:
+            lost = exc.result == MissionRawResult.TIMEOUT or (
+                exc.result == MissionRawResult.TRANSFER_CANCELLED and gave_up.is_set()
+            )
+            if lost and any(r.get("seq") == len(items) - 1 for _t, r in requests):
+                raise UploadUnconfirmed(
+                    f"the vehicle on {self.url} asked for all {len(items)} items but its "
+                    "acceptance did not come"
+                ) from None
+            if lost:
                 raise LinkTimeout(f"no answer from the vehicle on {self.url}") from None
             await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
-            last = requests[-1].get("seq") if requests else None
+            last = requests[-1][1].get("seq") if requests else None
             raise _rejection(exc.result, acks, texts, last) from None
         finally:
+            self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
             for watcher in watchers:
                 watcher.cancel()
             await asyncio.gather(*watchers, return_exceptions=True)
 
     async def download(self) -> list[WireItem]:
         """The vehicle's mission, as MISSION_ITEM_INT items."""
+        self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
         try:
             got = await self.mission.download_mission()
         except MissionRawError as exc:
@@ -167,17 +260,17 @@ def _from_mavsdk(item: MavsdkItem) -> WireItem:
 
 def _rejection(
     result: MissionRawResult,
-    acks: list[dict[str, Any]],
-    texts: list[dict[str, Any]],
+    acks: list[tuple[float, dict[str, Any]]],
+    texts: list[tuple[float, dict[str, Any]]],
     seq: int | None,
 ) -> MissionRejected:
-    refusals = [ack["type"] for ack in acks if ack.get("type") != mavlink.MAV_MISSION_ACCEPTED]
+    refusals = [ack["type"] for _t, ack in acks if ack.get("type") != mavlink.MAV_MISSION_ACCEPTED]
     entry = mavlink.enums["MAV_MISSION_RESULT"].get(refusals[-1]) if refusals else None
     fallback = _RESULT_ACK.get(result, f"MAVSDK {result.name}")
     name = entry.name if entry is not None else fallback
     capacity = None
     detail = ""
-    for text in texts:
+    for _t, text in texts:
         words = str(text.get("text", "")).split()
         # ArduPilot: "Only 700 items are supported" comes with a refusal over capacity.
         if words[:1] == ["Only"] and words[2:5] == ["items", "are", "supported"]:

@@ -29,7 +29,7 @@ from urpt_gcs.safety import (
     leg_clearances,
     split_sorties,
 )
-from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, solve
+from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, choose, prepare, solve
 from urpt_gcs.targets import Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
     WGS84,
@@ -313,8 +313,12 @@ def plan(
     say("checking viewpoints")
     instance = build_instance(terrain, regions, targets_xy, ground, camera, home_xy, top)
     lap("viewpoints")
+    solver = choose(instance, settings.solver)
+    say(f"preparing the {solver} solver (compiled on first use)")
+    prepare(solver)
+    lap("compile")
     say(f"solving ({instance.n_viewpoints} viewpoints)")
-    tour = solve(instance, settings.solver, settings.solve)
+    tour = solve(instance, solver, settings.solve)
     lap("solve")
 
     if tour.points_xy is None:

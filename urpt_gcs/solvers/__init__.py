@@ -26,7 +26,16 @@ SOLVER_CHOICES = ("auto", *SOLVERS)
 # Heuristics in order of preference for `auto` when the exact solver would take too long.
 _FALLBACKS = ("heuristic", "ortools")
 
-__all__ = ["SOLVERS", "SOLVER_CHOICES", "SolveSettings", "Solver", "Tour", "choose", "solve"]
+__all__ = [
+    "SOLVERS",
+    "SOLVER_CHOICES",
+    "SolveSettings",
+    "Solver",
+    "Tour",
+    "choose",
+    "prepare",
+    "solve",
+]
 
 
 def choose(instance: Instance, name: str = "auto") -> str:
@@ -40,6 +49,19 @@ def choose(instance: Instance, name: str = "auto") -> str:
     if exact_work(instance).fits_budget:
         return "exact"
     return next(s for s in _FALLBACKS if s in SOLVERS)
+
+
+def prepare(name: str) -> None:
+    """Compile the named solver's kernels now (numba; cached on disk after the first run), so
+    that its time limit is spent searching."""
+    if name == "exact":
+        from urpt_gcs.solvers.exact import warm_up as warm_exact
+
+        warm_exact()
+    elif name == "heuristic":
+        from urpt_gcs.solvers.heuristic import warm_up as warm_heuristic
+
+        warm_heuristic()
 
 
 def solve(instance: Instance, name: str = "auto", settings: SolveSettings | None = None) -> Tour:

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.gtsp import Instance
+from urpt_gcs.gtsp import Instance, euclidean_matrix
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 
 # What `auto` lets the exact solver spend: state expansions and bytes of DP tables.
@@ -220,6 +220,13 @@ def solve_exact(
             upper = length
             best = (_walk_back(parent_mask, parent_v, full, v), length)
     return best
+
+
+def warm_up() -> None:
+    """Compile the DP kernels, or load them from numba's cache, on a tiny instance."""
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    tiny = Instance(covers=np.eye(3, dtype=bool), distance=euclidean_matrix(points))
+    solve_exact(tiny)
 
 
 class ExactSolver:
