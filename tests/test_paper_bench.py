@@ -40,3 +40,54 @@ def test_bench_paper_quick(tmp_path: Path) -> None:
         # Flying over every target is one of the candidate tours.
         assert optimum <= float(row["naive"]) + 1e-6
         assert float(row["approx_path"]) <= float(row["theorem_factor"]) * optimum
+
+
+def test_tables_survive_an_instance_seen_from_one_point(tmp_path: Path) -> None:
+    """Where one viewpoint sees every target the optimum is 0: no ratio, no division."""
+    from urpt_gcs.bench.paper import Row, format_tables, read_csv, write_csv
+
+    rows = [
+        Row(
+            0,
+            4,
+            30.0,
+            20,
+            84,
+            0.0,
+            True,
+            0.01,
+            0.0,
+            0.1,
+            "heuristic",
+            90.0,
+            470.0,
+            3,
+            540.0,
+            0.0,
+            180.0,
+        ),
+        Row(
+            1,
+            4,
+            30.0,
+            20,
+            84,
+            100.0,
+            True,
+            0.01,
+            100.0,
+            0.1,
+            "heuristic",
+            150.0,
+            400.0,
+            2,
+            540.0,
+            10.0,
+            180.0,
+        ),
+    ]
+    write_csv(rows, tmp_path / "results.csv")
+    assert read_csv(tmp_path / "results.csv") == rows
+    text = format_tables(rows)
+    assert "1 with optimum 0" in text
+    assert "on the 1 instances with optimum > 0: True" in text

@@ -263,7 +263,10 @@ def _window_for(
     return rasterio.windows.Window(c0, r0, max(c1 - c0, 0), max(r1 - r0, 0))
 
 
-def _read_native(info: DemInfo, area: tuple[float, float, float, float]) -> Terrain:
+def _read_window(
+    info: DemInfo, area: tuple[float, float, float, float]
+) -> tuple[rasterio.windows.Window, FloatArray]:
+    """The window of the raster covering ``area`` (in the raster's CRS) and its elevations."""
     window = _window_for(info, area, pad_px=2)
     if window.width == 0 or window.height == 0:
         raise DemError(
@@ -272,18 +275,21 @@ def _read_native(info: DemInfo, area: tuple[float, float, float, float]) -> Terr
         )
     with rasterio.open(info.path) as src:
         band = src.read(1, window=window, masked=True)
-    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+    return window, _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+
+
+def _window_px(window: rasterio.windows.Window) -> tuple[int, int, int, int]:
+    return (int(window.col_off), int(window.row_off), int(window.width), int(window.height))
+
+
+def _read_native(info: DemInfo, area: tuple[float, float, float, float]) -> Terrain:
+    window, z = _read_window(info, area)
     return Terrain(
         elevation_m=z,
         transform=rasterio.windows.transform(window, info.transform),
         crs=info.horizontal_crs,
         source=str(info.path),
-        read_window_px=(
-            int(window.col_off),
-            int(window.row_off),
-            int(window.width),
-            int(window.height),
-        ),
+        read_window_px=_window_px(window),
         source_shape_px=(info.height_px, info.width_px),
     )
 
@@ -292,27 +298,14 @@ def _read_warped(
     info: DemInfo, crs: pyproj.CRS, area: tuple[float, float, float, float]
 ) -> Terrain:
     src_area = rasterio.warp.transform_bounds(crs, info.horizontal_crs, *area, densify_pts=21)
-    window = _window_for(info, src_area, pad_px=2)
-    if window.width == 0 or window.height == 0:
-        raise DemError(
-            f"DEM '{info.path}' does not cover the targets' area: check that the targets "
-            "belong to this site"
-        )
-    with rasterio.open(info.path) as src:
-        band = src.read(1, window=window, masked=True)
-    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+    window, z = _read_window(info, src_area)
     transform, error_m = _fit_affine(info, crs, window)
     terrain = Terrain(
         elevation_m=z,
         transform=transform,
         crs=crs,
         source=str(info.path),
-        read_window_px=(
-            int(window.col_off),
-            int(window.row_off),
-            int(window.width),
-            int(window.height),
-        ),
+        read_window_px=_window_px(window),
         source_shape_px=(info.height_px, info.width_px),
     )
     if error_m > max(0.05 * terrain.cell_m, 0.005):
