@@ -319,7 +319,7 @@ def read_csv(path: Path) -> list[Row]:
     rows = []
     with path.open(newline="") as fh:
         for record in csv.DictReader(fh):
-            values = {
+            values: dict[str, Any] = {
                 k: (record[k] == "True") if kinds[k] is bool else kinds[k](record[k]) for k in kinds
             }
             rows.append(Row(**values))
