@@ -1,0 +1,12 @@
+"""The ``urpt-gcs`` command line: a thin layer over the library, one module per command group.
+
+Only :class:`urpt_gcs.errors.UrptError` is caught: its message goes to stderr on one line and
+the exit status is 1. Usage errors (unknown flags, a word where a number belongs) exit 2.
+"""
+
+from __future__ import annotations
+
+from urpt_gcs.cli import bench, plan, vehicle
+from urpt_gcs.cli._root import main
+
+__all__ = ["bench", "main", "plan", "vehicle"]

@@ -1,0 +1,96 @@
+"""``urpt-gcs bench``: the solver studies."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from urpt_gcs.cli._root import fail, main
+from urpt_gcs.errors import UrptError
+
+
+@main.group("bench")
+def bench_group() -> None:
+    """Benchmarks: the solvers on published instance sets, beside published results."""
+
+
+@bench_group.command("gtsplib")
+@click.argument("directory", type=click.Path(path_type=Path))
+@click.option(
+    "--time-limit",
+    type=float,
+    default=None,
+    help="Seconds per solve [default: 3x GLNS's published mean time, else 10].",
+)
+@click.option("--runs", type=int, default=1, show_default=True, help="Runs (seeds) per solver.")
+@click.option("--only", default=None, metavar="NAME[,NAME]", help="Run only these instances.")
+@click.option(
+    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
+)
+@click.option(
+    "--solver",
+    default=None,
+    metavar="NAME[,NAME]",
+    help="Solver(s) to compare [default: heuristic]; OR-Tools always runs as the baseline.",
+)
+def bench_gtsplib_command(
+    directory: Path,
+    time_limit: float | None,
+    runs: int,
+    only: str | None,
+    out: Path | None,
+    solver: str | None,
+) -> None:
+    """Solve GTSPLIB files in DIRECTORY; compare with best_known.csv and glns_default.csv."""
+    from urpt_gcs.bench.gtsplib import format_table, run_gtsplib
+
+    def names(text: str | None) -> list[str]:
+        return [part.strip() for part in (text or "").split(",") if part.strip()]
+
+    interactive = sys.stderr.isatty()
+    try:
+        rows = run_gtsplib(
+            directory,
+            solvers=names(solver),
+            time_limit_s=time_limit,
+            runs=runs,
+            only=names(only) or None,
+            out_dir=out,
+            progress=(lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None,
+        )
+    except UrptError as exc:
+        fail(exc)
+        return
+    click.echo(format_table(rows))
+
+
+@bench_group.command("paper")
+@click.option("--quick", is_flag=True, help="A small subset of the study (what CI runs).")
+@click.option(
+    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
+)
+@click.option(
+    "--heuristic-time",
+    type=float,
+    default=1.0,
+    show_default=True,
+    help="Seconds the heuristic gets per instance.",
+)
+def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) -> None:
+    """Reproduce the paper's simulation study: 540 instances on random TIN terrains."""
+    from urpt_gcs.bench.paper import format_tables, run_paper
+
+    interactive = sys.stderr.isatty()
+    try:
+        rows = run_paper(
+            quick=quick,
+            out_dir=out,
+            heuristic_s=heuristic_time,
+            progress=(lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None,
+        )
+    except UrptError as exc:
+        fail(exc)
+        return
+    click.echo(format_tables(rows))

@@ -1,0 +1,230 @@
+"""``urpt-gcs plan`` and ``urpt-gcs demo-site``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
+from urpt_gcs.errors import UrptError
+from urpt_gcs.link import DEFAULT_URL
+from urpt_gcs.mission import FIRMWARES, MissionSettings
+from urpt_gcs.planner import PlanSettings
+from urpt_gcs.progress import StageProgress
+from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
+
+
+@main.command("plan")
+@click.option("--dem", "dem", required=True, help="DSM/DEM GeoTIFF of the site (e.g. from Pix4D).")
+@click.option(
+    "--targets", "targets", required=True, help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon)."
+)
+@click.option("--out", "out", default="out", show_default=True, help="Folder for the outputs.")
+@click.option(
+    "--fov",
+    "fov",
+    type=float,
+    default=30.0,
+    show_default=True,
+    help="Camera half-angle from nadir, degrees.",
+)
+@click.option(
+    "--samples",
+    type=int,
+    default=36,
+    show_default=True,
+    help="Azimuths sampled per visibility region.",
+)
+@click.option(
+    "--altitude",
+    type=float,
+    default=None,
+    help="Flight-plane altitude in the DEM's vertical datum, metres.",
+)
+@click.option(
+    "--clearance",
+    type=float,
+    default=30.0,
+    show_default=True,
+    help="Without --altitude: metres above the highest terrain in the area.",
+)
+@click.option(
+    "--min-clearance",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Refuse a plan whose legs pass closer than this to the terrain, metres.",
+)
+@click.option(
+    "--max-agl",
+    type=float,
+    default=120.0,
+    show_default=True,
+    help="Height above ground (under every stop, and above home) to warn about, metres.",
+)
+@click.option("--strict", is_flag=True, help="Refuse, rather than warn, over --max-agl.")
+@click.option(
+    "--endurance",
+    type=float,
+    default=20.0,
+    show_default=True,
+    help="Battery endurance, minutes; a longer tour is split into sorties.",
+)
+@click.option("--no-map", is_flag=True, help="Do not draw map.png.")
+@click.option(
+    "--home", "home", default=None, help="Take-off point LAT,LON (overrides a Home placemark)."
+)
+@click.option(
+    "--hold", type=float, default=2.0, show_default=True, help="Hold at each viewpoint, s."
+)
+@click.option("--speed", type=float, default=5.0, show_default=True, help="Cruise speed, m/s.")
+@click.option(
+    "--firmware",
+    type=str,
+    default="ardupilot",
+    show_default=True,
+    help=f"Autopilot: {' or '.join(FIRMWARES)}.",
+)
+@click.option(
+    "--solver",
+    type=str,
+    default="auto",
+    show_default=True,
+    help=f"One of {', '.join(SOLVER_CHOICES)}.",
+)
+@click.option(
+    "--time-limit",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Seconds the solver may search.",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("--quiet", is_flag=True, help="Print nothing but errors.")
+@click.option(
+    "--export-gtsp",
+    "export_gtsp",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the planning instance as a GTSPLIB file (EUC_2D, centimetres).",
+)
+@click.option(
+    "--upload", "do_upload", is_flag=True, help="Upload the mission and verify its read-back."
+)
+@click.option(
+    "--connect",
+    default=DEFAULT_URL,
+    show_default=True,
+    help="With --upload: MAVSDK connection string of the vehicle.",
+)
+@click.option(
+    "--retries",
+    type=int,
+    default=3,
+    show_default=True,
+    help="With --upload: whole uploads tried again after a failure.",
+)
+def plan_command(
+    dem: str,
+    targets: str,
+    out: str,
+    fov: float,
+    samples: int,
+    altitude: float | None,
+    clearance: float,
+    min_clearance: float,
+    max_agl: float,
+    strict: bool,
+    endurance: float,
+    no_map: bool,
+    home: str | None,
+    hold: float,
+    speed: float,
+    firmware: str,
+    solver: str,
+    time_limit: float,
+    seed: int,
+    as_json: bool,
+    quiet: bool,
+    export_gtsp: Path | None,
+    do_upload: bool,
+    connect: str,
+    retries: int,
+) -> None:
+    """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
+    from urpt_gcs.planner import plan
+    from urpt_gcs.products import write_products
+    from urpt_gcs.report import summary_text
+
+    try:
+        settings = PlanSettings(
+            fov_deg=fov,
+            samples=samples,
+            altitude_m=altitude,
+            clearance_m=clearance,
+            min_clearance_m=min_clearance,
+            max_agl_m=max_agl,
+            strict=strict,
+            endurance_min=endurance,
+            home=parse_home(home),
+            solver=solver,
+            solve=SolveSettings(time_limit_s=time_limit, seed=seed),
+            mission=MissionSettings(
+                firmware=firmware,  # type: ignore[arg-type]  # validated in __post_init__
+                hold_s=hold,
+                cruise_speed_m_s=speed,
+                hover_speed_m_s=speed,
+            ),
+        )
+        if sys.stderr.isatty() and not (quiet or as_json):
+            with StageProgress(sys.stderr, time_limit) as progress:
+                result = plan(Path(dem), Path(targets), settings, progress=progress)
+        else:
+            result = plan(Path(dem), Path(targets), settings)
+        data = write_products(result, Path(out), with_map=not no_map)
+        if export_gtsp is not None:
+            from urpt_gcs.formats.gtsplib import export_gtsplib
+
+            export_gtsplib(
+                result.instance, export_gtsp, comment=f"urpt-gcs plan of {Path(targets).name}"
+            )
+    except UrptError as exc:
+        fail(exc)
+        return
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+    elif not quiet:
+        click.echo(summary_text(data))
+    if do_upload:
+        if len(result.missions) > 1:
+            click.echo(
+                f"uploading sortie 1 of {len(result.missions)}; upload the others with "
+                "urpt-gcs upload after each landing",
+                err=True,
+            )
+        upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json)
+
+
+@main.command("demo-site")
+@click.option(
+    "--out",
+    "out",
+    default="missions/demo",
+    show_default=True,
+    help="Folder for site.tif and targets.kml.",
+)
+@click.option("--seed", type=int, default=7, show_default=True)
+def demo_site_command(out: str, seed: int) -> None:
+    """Generate the demo site: a Pix4D-like DSM and a KML of targets."""
+    from urpt_gcs.demo import make_demo_site
+
+    try:
+        site = make_demo_site(Path(out), seed=seed)
+    except UrptError as exc:
+        fail(exc)
+        return
+    click.echo(f"wrote {site.dsm_path} and {site.targets_path}")

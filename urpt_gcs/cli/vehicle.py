@@ -1,0 +1,199 @@
+"""``urpt-gcs upload`` and ``urpt-gcs sitl``: the mission on a vehicle."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import click
+
+from urpt_gcs.cli._root import fail, main, upload_and_report
+from urpt_gcs.errors import UrptError
+from urpt_gcs.link import DEFAULT_URL
+
+
+@main.command("upload")
+@click.argument("mission_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.option(
+    "--connect",
+    default=DEFAULT_URL,
+    show_default=True,
+    help="MAVSDK connection string (udpin://, udpout://, tcpout://, serial://).",
+)
+@click.option(
+    "--retries",
+    type=int,
+    default=3,
+    show_default=True,
+    help="Whole uploads tried again after a timeout, refusal or differing read-back.",
+)
+@click.option(
+    "--timeout",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Seconds to wait for the autopilot's heartbeat.",
+)
+def upload_command(mission_file: Path, connect: str, retries: int, timeout: float) -> None:
+    """Upload a .plan (or .waypoints, as ArduPilot) and verify the vehicle reads it back."""
+    from urpt_gcs.sitl.replay import read_mission
+
+    try:
+        mission = read_mission(mission_file)
+    except UrptError as exc:
+        fail(exc)
+        return
+    upload_and_report(mission, connect, retries, timeout, quiet=False)
+
+
+@main.group("sitl", invoke_without_command=True)
+@click.option(
+    "--listen",
+    default="udpout://127.0.0.1:14550",
+    show_default=True,
+    help="The simulator's end: udpout://HOST:PORT, udpin://HOST:PORT or tcpin://HOST:PORT.",
+)
+@click.option("--home", default=None, metavar="LAT,LON,ALT", help="Home; ALT in m AMSL.")
+@click.option("--speedup", type=float, default=1.0, show_default=True, help="Simulated s per s.")
+@click.option("--loss", type=float, default=0.0, show_default=True, help="Packet loss each way.")
+@click.option("--latency", type=float, default=0.0, show_default=True, help="Delay each way, ms.")
+@click.option(
+    "--drop-after",
+    type=int,
+    default=None,
+    help="Go silent for a few seconds after receiving this many mission items (once).",
+)
+@click.option("--px4", is_flag=True, help="Identify as PX4: no home item at seq 0.")
+@click.option(
+    "--capacity", type=int, default=700, show_default=True, help="Most mission items held."
+)
+@click.option(
+    "--boot",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Seconds after start that uploads and arming are refused, as ArduPilot does.",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the packet loss.")
+@click.pass_context
+def sitl_group(
+    ctx: click.Context,
+    listen: str,
+    home: str | None,
+    speedup: float,
+    loss: float,
+    latency: float,
+    drop_after: int | None,
+    px4: bool,
+    capacity: int,
+    boot: float,
+    seed: int,
+) -> None:
+    """Run a simulated ArduCopter on a MAVLink connection until Ctrl-C.
+
+    `urpt-gcs sitl replay` flies a mission on one and checks it against the terrain.
+    """
+    if ctx.invoked_subcommand is not None:
+        return
+    from urpt_gcs.sitl import SitlServer, VehicleSettings, parse_home
+
+    try:
+        settings = VehicleSettings(
+            speedup=speedup,
+            loss=loss,
+            latency_ms=latency,
+            drop_after=drop_after,
+            px4=px4,
+            capacity=capacity,
+            boot_s=boot,
+            seed=seed,
+        )
+        if home is not None:
+            settings = replace(settings, home=parse_home(home))
+        server = SitlServer(settings, listen)
+        where = settings.home
+        click.echo(
+            f"simulated {'PX4' if px4 else 'ArduCopter'} quadrotor on {listen}, home "
+            f"{where.lat_deg:.7f},{where.lon_deg:.7f} at {where.amsl_m:g} m, speed-up "
+            f"{speedup:g}x; Ctrl-C stops it",
+            err=True,
+        )
+        server.serve()
+    except UrptError as exc:
+        fail(exc)
+    except KeyboardInterrupt:
+        click.echo("simulator stopped", err=True)
+
+
+@sitl_group.command("replay")
+@click.option("--dem", "dem", required=True, type=click.Path(path_type=Path), help="DSM GeoTIFF.")
+@click.option(
+    "--targets", "targets", required=True, type=click.Path(path_type=Path), help="Target file."
+)
+@click.option(
+    "--plan",
+    "plan_file",
+    required=True,
+    type=click.Path(path_type=Path),
+    help="Mission to fly: .plan or .waypoints.",
+)
+@click.option("--speedup", type=float, default=50.0, show_default=True, help="Simulated s per s.")
+@click.option(
+    "--fov", type=float, default=30.0, show_default=True, help="Camera half-angle, degrees."
+)
+@click.option(
+    "--min-clearance",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Least height above the terrain on cruise legs, m.",
+)
+@click.option(
+    "--takeoff",
+    type=click.Choice(["auto-options", "guided"]),
+    default="auto-options",
+    show_default=True,
+    help="Take off in AUTO (AUTO_OPTIONS=2) or in GUIDED before AUTO.",
+)
+@click.option("--timeout", type=float, default=None, help="Wall-clock limit for the flight, s.")
+@click.option(
+    "--connect",
+    default=None,
+    help="Fly on this vehicle (e.g. ArduPilot SITL, tcpout://127.0.0.1:5760) instead of the "
+    "built-in simulator; give its --speedup.",
+)
+def sitl_replay_command(
+    dem: Path,
+    targets: Path,
+    plan_file: Path,
+    speedup: float,
+    fov: float,
+    min_clearance: float,
+    takeoff: str,
+    timeout: float | None,
+    connect: str | None,
+) -> None:
+    """Fly a mission on the simulated copter via MAVSDK; check photos and clearance on the DEM."""
+    from urpt_gcs.sitl.judge import report_text
+    from urpt_gcs.sitl.replay import ReplaySettings, replay
+
+    progress = (lambda msg: click.echo(f"... {msg}", err=True)) if sys.stderr.isatty() else None
+    try:
+        settings = ReplaySettings(
+            speedup=speedup,
+            fov_deg=fov,
+            min_clearance_m=min_clearance,
+            takeoff=takeoff,  # type: ignore[arg-type]  # click.Choice checked it
+            timeout_s=timeout,
+            connect=connect,
+        )
+        report = replay(dem, targets, plan_file, settings, progress)
+    except UrptError as exc:
+        fail(exc)
+        return
+    click.echo(report_text(report))
+    if not report.ok:
+        more = f" (and {len(report.problems) - 1} more)" if len(report.problems) > 1 else ""
+        click.echo(f"urpt-gcs: error: replay failed: {report.problems[0]}{more}", err=True)
+        sys.exit(1)
