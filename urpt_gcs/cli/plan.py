@@ -185,13 +185,15 @@ def plan_command(
                 result = plan(Path(dem), Path(targets), settings, progress=progress)
         else:
             result = plan(Path(dem), Path(targets), settings)
+        comment = f"urpt-gcs plan of {Path(targets).name}"
+        if export_gtsp is not None:
+            from urpt_gcs.formats.gtsplib import export_gtsplib, write_gtsplib
+
+            # Refuse an instance GTSPLIB cannot hold before any file is written.
+            write_gtsplib(result.instance, export_gtsp.stem, comment)
         data = write_products(result, Path(out), with_map=not no_map)
         if export_gtsp is not None:
-            from urpt_gcs.formats.gtsplib import export_gtsplib
-
-            export_gtsplib(
-                result.instance, export_gtsp, comment=f"urpt-gcs plan of {Path(targets).name}"
-            )
+            export_gtsplib(result.instance, export_gtsp, comment=comment)
     except UrptError as exc:
         fail(exc)
         return
