@@ -11,6 +11,7 @@ import math
 from typing import Any
 
 import numpy as np
+import pyproj
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LightSource
 from matplotlib.figure import Figure
@@ -19,7 +20,7 @@ from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.transforms import Affine2D
 
 from urpt_gcs.planner import Plan
-from urpt_gcs.terrain import FloatArray
+from urpt_gcs.terrain import WGS84, FloatArray
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.
 _MAX_DISPLAY_PX = 1600
@@ -118,8 +119,23 @@ def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
         [hx], [hy], marker="*", s=260, c="white", edgecolors="black", zorder=11, label="home"
     )
 
+    to_map = pyproj.Transformer.from_crs(WGS84, plan.crs, always_xy=True)
+    fence_lat, fence_lon = zip(*plan.geofence_latlon, strict=True)
+    fx, fy = to_map.transform(fence_lon, fence_lat)
+    ax.add_patch(
+        PolygonPatch(
+            np.column_stack([fx, fy]),
+            closed=True,
+            fill=False,
+            edgecolor="#c00000",
+            linestyle="--",
+            linewidth=1.2,
+            zorder=4,
+            label="geofence",
+        )
+    )
     everything = np.vstack(
-        [path, plan.targets_xy]
+        [path, plan.targets_xy, np.column_stack([fx, fy])]
         + [np.asarray(r.polygon.exterior.coords) for r in plan.regions if not r.polygon.is_empty]
     )
     lo, hi = everything.min(axis=0), everything.max(axis=0)
