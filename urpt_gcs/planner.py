@@ -275,7 +275,7 @@ def plan(
     all_ground = _check_ground(
         info,
         terrain,
-        [*names, f"home ({home_source})"],
+        [*(f"target '{n}'" for n in names), f"home ({home_source})"],
         [*lat_lon, (home_lat, home_lon)],
         points_xy,
     )
