@@ -121,7 +121,6 @@ def test_region_is_star_shaped_and_inside_the_cone(bumps, fov, tmp_path_factory)
     """Every point between the target and a ray's reach sees the target (star-shaped), and
     no reach exceeds the cone."""
     import rasterio
-    from conftest import write_dem as _unused  # noqa: F401  (fixture module import check)
     from rasterio.transform import from_origin
 
     x, y = grid_xy((200, 200), 1.0, ORIGIN)

@@ -15,11 +15,12 @@ import io
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import astuple, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from urpt_gcs.bench import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.formats.gtsplib import read_gtsplib
 from urpt_gcs.gtsp import Instance
@@ -286,24 +287,8 @@ def run_gtsplib(
 
 
 def results_csv(rows: Sequence[Row]) -> str:
-    """The rows as CSV text.
-
-    Parameters
-    ----------
-    rows
-        Rows from :func:`run_gtsplib`.
-
-    Returns
-    -------
-    str
-        A header of the :class:`Row` field names, then one line per row; absent values empty.
-    """
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow([f.name for f in fields(Row)])
-    for row in rows:
-        writer.writerow(["" if value is None else value for value in astuple(row)])
-    return buffer.getvalue()
+    """The rows as CSV text (see :func:`urpt_gcs.bench.rows_csv`)."""
+    return rows_csv(Row, rows)
 
 
 def _mean(values: Sequence[float | None]) -> float | None:

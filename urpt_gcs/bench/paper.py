@@ -16,7 +16,6 @@ nadir points.
 from __future__ import annotations
 
 import csv
-import io
 import itertools
 import math
 import time
@@ -29,6 +28,7 @@ import numpy as np
 import pyproj
 from affine import Affine
 
+from urpt_gcs.bench import rows_csv
 from urpt_gcs.gtsp import Instance, build_instance, euclidean_matrix
 from urpt_gcs.output import write_all
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
@@ -221,12 +221,7 @@ def run_paper(
 
 def write_csv(rows: Sequence[Row], path: Path) -> None:
     """Write the rows as CSV, all or nothing."""
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=list(Row.__slots__), lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow(asdict(row))
-    write_all(path.parent, {path.name: text.getvalue()})
+    write_all(path.parent, {path.name: rows_csv(Row, rows)})
 
 
 def _cell_table(title: str, rows: Sequence[Row], cell: Callable[[list[Row]], str]) -> str:

@@ -7,6 +7,7 @@ the exit status is 1. Usage errors (unknown flags, a word where a number belongs
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 
 import click
 
@@ -27,7 +28,7 @@ def upload_and_report(
     """Upload with a verified read-back; one line on success, exit 1 on failure."""
     from urpt_gcs.link import upload
 
-    progress = (lambda msg: click.echo(f"... {msg}", err=True)) if sys.stderr.isatty() else None
+    progress = terminal_progress()
     try:
         report = upload(mission, url, retries=retries, timeout_s=timeout_s, progress=progress)
     except UrptError as exc:
@@ -41,6 +42,13 @@ def upload_and_report(
             f"uploaded {report.items} items to {report.url} ({report.autopilot}); read back "
             f"identical in {report.elapsed_s:.2f} s ({tries})"
         )
+
+
+def terminal_progress() -> Callable[[str], None] | None:
+    """A sink printing progress messages on stderr when it is a terminal, else None."""
+    if not sys.stderr.isatty():
+        return None
+    return lambda msg: click.echo(f"... {msg}", err=True)
 
 
 def parse_home(text: str | None) -> tuple[float, float] | None:

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
 
-from urpt_gcs.cli._root import fail, main
+from urpt_gcs.cli._root import fail, main, terminal_progress
 from urpt_gcs.errors import UrptError
 
 
@@ -49,7 +48,6 @@ def bench_gtsplib_command(
     def names(text: str | None) -> list[str]:
         return [part.strip() for part in (text or "").split(",") if part.strip()]
 
-    interactive = sys.stderr.isatty()
     try:
         rows = run_gtsplib(
             directory,
@@ -58,7 +56,7 @@ def bench_gtsplib_command(
             runs=runs,
             only=names(only) or None,
             out_dir=out,
-            progress=(lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None,
+            progress=terminal_progress(),
         )
     except UrptError as exc:
         fail(exc)
@@ -82,13 +80,12 @@ def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) ->
     """Reproduce the paper's simulation study: 540 instances on random TIN terrains."""
     from urpt_gcs.bench.paper import format_tables, run_paper
 
-    interactive = sys.stderr.isatty()
     try:
         rows = run_paper(
             quick=quick,
             out_dir=out,
             heuristic_s=heuristic_time,
-            progress=(lambda msg: click.echo(f"... {msg}", err=True)) if interactive else None,
+            progress=terminal_progress(),
         )
     except UrptError as exc:
         fail(exc)

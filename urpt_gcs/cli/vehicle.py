@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from urpt_gcs.cli._root import fail, main, upload_and_report
+from urpt_gcs.cli._root import fail, main, terminal_progress, upload_and_report
 from urpt_gcs.errors import UrptError
 from urpt_gcs.link import DEFAULT_URL
 
@@ -178,7 +178,7 @@ def sitl_replay_command(
     from urpt_gcs.sitl.judge import report_text
     from urpt_gcs.sitl.replay import ReplaySettings, replay
 
-    progress = (lambda msg: click.echo(f"... {msg}", err=True)) if sys.stderr.isatty() else None
+    progress = terminal_progress()
     try:
         settings = ReplaySettings(
             speedup=speedup,
