@@ -138,19 +138,33 @@ def check_mission(
             reasons.append(why)
         else:
             problems.append(f"target {name} is seen from no waypoint: {sorted(set(reasons))[:3]}")
+    for number, clearances in enumerate(leg_clearances(raster, sorties), start=1):
+        for k, clearance in enumerate(clearances, start=1):
+            if clearance < min_clearance_m:
+                problems.append(
+                    f"sortie {number} leg {k} passes {clearance:.2f} m over the terrain"
+                )
+    return problems
+
+
+def leg_clearances(
+    raster: Raster, sorties: list[FlownMission], cells_per_sample: float = 0.125
+) -> list[list[float]]:
+    """Per sortie, the least height of each leg (home, waypoints, home) above the terrain,
+    from samples every ``cells_per_sample`` cells (nan over no data)."""
+    eyes = [w for flown in sorties for w in flown.waypoints]
     altitude = {round(w[2], 3) for w in eyes}
     assert len(altitude) == 1, "the flight plane is not constant"
     h = eyes[0][2]
-    for number, flown in enumerate(sorties, start=1):
+    out = []
+    for flown in sorties:
         path = [flown.home[:2], *[w[:2] for w in flown.waypoints], flown.home[:2]]
-        for k, (a, b) in enumerate(itertools.pairwise(path), start=1):
+        legs = []
+        for a, b in itertools.pairwise(path):
             _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
-            lon, lat, _ = _segment(raster, a, b, dist)
+            lon, lat, _ = _segment(raster, a, b, dist, cells_per_sample)
             ground = raster.height(lon, lat)
             known = ground[np.isfinite(ground)]
-            if known.size and float(known.max()) > h - min_clearance_m:
-                problems.append(
-                    f"sortie {number} leg {k} passes "
-                    f"{h - float(known.max()):.2f} m over the terrain"
-                )
-    return problems
+            legs.append(h - float(known.max()) if known.size else math.nan)
+        out.append(legs)
+    return out

@@ -119,6 +119,20 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--out", str(BAD / "output_folder_is_a_file")],
         ["output_folder_is_a_file", "--out"],
     ),
+    # A wall one pixel wide between West and East, 5 m above the plane: between two samples
+    # half a cell apart it reads as 1.3 m under the plane; its true top is found.
+    "leg_through_thin_wall": (
+        [
+            "--dem",
+            str(BAD / "dem_thin_wall.tif"),
+            "--targets",
+            str(BAD / "thin_wall.csv"),
+            "--altitude",
+            "160",
+        ],
+        ["cuts 5.0 m into the terrain", "raise --altitude"],
+    ),
+    "fov_narrower_than_waypoint_grid": (["--fov", "0.001"], ["--fov 0.001", "1e-7 degree"]),
 }
 
 

@@ -13,7 +13,7 @@ import shapely
 from click.testing import CliRunner
 from conftest import DEMO, WriteDem, grid_xy
 from fastkml import kml as fastkml
-from independent import check_mission
+from independent import check_mission, leg_clearances, load_raster, read_waypoints_file
 from shapely.geometry import Point, shape
 
 from urpt_gcs.cli import main
@@ -52,6 +52,28 @@ def test_leg_through_a_ridge_is_refused(tmp_path: Path, write_dem: WriteDem) -> 
     # The same ridge under a plane 30 m above it is flown.
     ok = plan(dem, targets, PlanSettings(altitude_m=230.0, solve=FAST))
     assert min(leg.min_clearance_m for leg in ok.legs) >= 30.0 - 0.5
+
+
+def test_clearance_over_a_thin_wall_is_exact(tmp_path: Path, write_dem: WriteDem) -> None:
+    """Flat ground at 100 m in 10 m cells, a wall one pixel wide rising to 140 m between the
+    targets, plane at 160 m: the legs across it clear it by exactly 20 m, which dense
+    independent samples of the written legs confirm."""
+    z = np.full((40, 40), 100.0)
+    z[:, 20] = 140.0
+    dem = write_dem(z, res=10.0, origin=ORIGIN)
+    targets = _csv(
+        tmp_path / "t.csv", [("West", 145.0, 195.0), ("East", 265.0, 195.0), ("Home", 145.0, 95.0)]
+    )
+    result = plan(dem, targets, PlanSettings(altitude_m=160.0, solve=FAST))
+    reported = np.array([leg.min_clearance_m for leg in result.legs])
+    out = tmp_path / "out"
+    write_products(result, out, with_map=False)
+    flown = read_waypoints_file(out / "mission.waypoints")
+    dense = np.array(leg_clearances(load_raster(dem), [flown], cells_per_sample=1 / 4096)[0])
+    assert np.all(reported <= dense + 1e-6)
+    assert np.all(reported >= dense - 0.01)
+    # Legs across the wall (|x - 205 m| changes sign) meet its top.
+    assert np.isclose(reported.min(), 160.0 - 140.0 + (result.altitude_rel_m - 60.0), atol=0.02)
 
 
 def test_short_endurance_splits_into_sorties_that_together_see_everything(

@@ -162,6 +162,15 @@ class MissionSettings:
                 raise SettingsError(f"{name} {value} m/s is out of range; use 0.1 to 50 m/s")
 
 
+def waypoint_positions(mission: Mission) -> list[tuple[float, float]]:
+    """(latitude, longitude) of the mission's NAV_WAYPOINT items, in flight order."""
+    return [
+        (item.params[4], item.params[5])
+        for item in mission.items
+        if item.command == mavlink.MAV_CMD_NAV_WAYPOINT
+    ]
+
+
 def _item(command: int, frame: int, *params: float) -> MissionItem:
     padded = tuple(float(p) for p in params) + (0.0,) * (7 - len(params))
     return MissionItem(command=command, frame=frame, params=padded)  # type: ignore[arg-type]

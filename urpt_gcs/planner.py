@@ -17,8 +17,14 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.errors import DemError, PlanError, SettingsError, TargetsError
-from urpt_gcs.gtsp import Instance, build_instance
-from urpt_gcs.mission import GeoPoint, Mission, MissionSettings, build_mission
+from urpt_gcs.gtsp import Instance, build_instance, cover_sets
+from urpt_gcs.mission import (
+    GeoPoint,
+    Mission,
+    MissionSettings,
+    build_mission,
+    waypoint_positions,
+)
 from urpt_gcs.safety import (
     FlightModel,
     Leg,
@@ -45,6 +51,9 @@ from urpt_gcs.visibility import BoolArray, Camera, Region, visibility_regions
 
 # Extra DEM read around the operating area, in cells, so bilinear samples at its edge exist.
 _WINDOW_MARGIN_CELLS = 4
+# The narrowest camera cone a plan accepts, as a radius on the flight plane: ten times the
+# 1e-7 degree grid waypoints are stored on, so a rounded waypoint stays well inside it.
+MIN_CONE_RADIUS_M = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -291,6 +300,10 @@ def plan(
             break
         area = need
         terrain = read_terrain(info, crs, area)
+    # Heights from the window planned on: a geographic DEM's fitted georeferencing differs
+    # slightly from one window to the next, and every line of sight ends on the target.
+    all_ground = terrain.sample(points_xy[:, 0], points_xy[:, 1])
+    ground, home_ground = all_ground[:-1], float(all_ground[-1])
     lap("terrain")
 
     low = np.flatnonzero(ground >= altitude)
@@ -306,6 +319,7 @@ def plan(
             "raise it or use --clearance"
         )
     camera = Camera(altitude_m=altitude, fov_deg=settings.fov_deg)
+    _check_cone_width(camera, ground, names)
 
     say(f"visibility of {len(names)} targets")
     regions = visibility_regions(terrain, targets_xy, ground, camera, settings.samples)
@@ -332,12 +346,28 @@ def plan(
     model = flight_model(settings)
     endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
     sorties = split_sorties(tour.points_xy, home_xy, altitude_rel, model, endurance, stop_names)
-    legs: tuple[Leg, ...] = ()
-    for sortie in sorties:
-        path = np.vstack([[home_xy], tour.points_xy[sortie.first : sortie.stop], [home_xy]])
-        legs += leg_clearances(
-            terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], altitude
-        )
+    # Home written a little low (whole centimetres, down): every check of the mission as
+    # written then measures from a height the vehicle is at or above.
+    home = GeoPoint(home_lat, home_lon, math.floor(home_ground * 100.0) / 100.0)
+    stops_latlon = _latlon(crs, tour.points_xy)
+    missions = tuple(
+        build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
+        for s in sorties
+    )
+    lap("mission")
+
+    legs = _check_as_written(
+        terrain,
+        crs,
+        missions,
+        sorties,
+        tour.sees,
+        targets_xy,
+        ground,
+        camera,
+        names,
+        stop_names,
+    )
     warnings += check_legs(legs, settings.min_clearance_m)
     stop_ground = terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
     warnings += check_height_above_ground(
@@ -353,14 +383,6 @@ def plan(
     )
     fence = tuple(_latlon(crs, fence_xy))
     lap("checks")
-
-    home = GeoPoint(home_lat, home_lon, round(home_ground, 2))
-    stops_latlon = _latlon(crs, tour.points_xy)
-    missions = tuple(
-        build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
-        for s in sorties
-    )
-    lap("mission")
     return Plan(
         settings=settings,
         dem=info,
@@ -387,6 +409,64 @@ def plan(
     )
 
 
+def _check_cone_width(camera: Camera, ground_m: FloatArray, names: list[str]) -> None:
+    """Refuse a camera cone too narrow for a waypoint to be placed inside it."""
+    cone = camera.cone_radius_m(ground_m)
+    i = int(np.argmin(cone))
+    if cone[i] >= MIN_CONE_RADIUS_M:
+        return
+    height = camera.altitude_m - float(ground_m[i])
+    need = math.degrees(math.atan(MIN_CONE_RADIUS_M / height))
+    raise SettingsError(
+        f"--fov {camera.fov_deg:g} sees only {cone[i] * 100:.2g} cm around target "
+        f"'{names[i]}', finer than a waypoint can be placed (1e-7 degree, about 1 cm): "
+        f"use --fov {math.ceil(need * 1000) / 1000:g} or more"
+    )
+
+
+def _check_as_written(
+    terrain: Terrain,
+    crs: pyproj.CRS,
+    missions: tuple[Mission, ...],
+    sorties: tuple[Sortie, ...],
+    sees: BoolArray,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    names: list[str],
+    stop_names: list[str],
+) -> tuple[Leg, ...]:
+    """Check the missions as the vehicle will store them, and return their legs.
+
+    Positions are the written ones (on the 1e-7 degree grid) and the altitude the written one
+    (whole centimetres above home): every stop must still see every target the plan says it
+    sees, and the legs' clearance is measured between those positions.
+    """
+    eye_m = missions[0].home.amsl_m + missions[0].altitude_rel_m
+    written_camera = Camera(altitude_m=eye_m, fov_deg=camera.fov_deg)
+    legs: tuple[Leg, ...] = ()
+    stops = []
+    for sortie, mission in zip(sorties, missions, strict=True):
+        home_xy = _xy(crs, [(mission.home.lat_deg, mission.home.lon_deg)])
+        at = _xy(crs, waypoint_positions(mission))
+        stops.append(at)
+        path = np.vstack([home_xy, at, home_xy])
+        legs += leg_clearances(
+            terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], eye_m
+        )
+    written = np.vstack(stops)
+    seen = cover_sets(terrain, written, targets_xy, ground_m, written_camera)
+    lost = np.argwhere(sees & ~seen)
+    if lost.size:
+        k, t = (int(v) for v in lost[0])
+        raise PlanError(
+            f"{stop_names[k]} no longer sees target '{names[t]}' once its position is written "
+            "to the mission's 1e-7 degree grid: it sits on the edge of what the camera sees; "
+            "widen --fov, raise --samples or change --altitude"
+        )
+    return legs
+
+
 def flight_model(settings: PlanSettings) -> FlightModel:
     """How the flight-time estimate sees the vehicle, from the settings."""
     return FlightModel(
@@ -400,6 +480,12 @@ def flight_model(settings: PlanSettings) -> FlightModel:
 
 def _stop_name(sees: BoolArray, names: list[str]) -> str:
     return "viewpoint for " + "+".join(names[t] for t in np.flatnonzero(sees).tolist())
+
+
+def _xy(crs: pyproj.CRS, lat_lon: list[tuple[float, float]]) -> FloatArray:
+    to_xy = pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
+    x, y = to_xy.transform([p[1] for p in lat_lon], [p[0] for p in lat_lon])
+    return np.column_stack([np.atleast_1d(x), np.atleast_1d(y)]).astype(np.float64)
 
 
 def _latlon(crs: pyproj.CRS, xy: FloatArray) -> list[tuple[float, float]]:

@@ -13,6 +13,7 @@ import numpy as np
 import shapely
 
 from urpt_gcs.errors import PlanError
+from urpt_gcs.segments import segment_profile
 from urpt_gcs.terrain import FloatArray, Terrain
 
 
@@ -61,20 +62,22 @@ class Sortie:
 def leg_clearances(
     terrain: Terrain, path_xy: FloatArray, names: list[str], altitude_m: float
 ) -> tuple[Leg, ...]:
-    """Sample every leg of ``path_xy`` (every half cell) against the terrain."""
-    legs = []
-    step = terrain.cell_m / 2.0
-    for i in range(len(path_xy) - 1):
-        a, b = path_xy[i], path_xy[i + 1]
-        length = float(np.hypot(*(b - a)))
-        n = max(math.ceil(length / step), 1)
-        t = np.linspace(0.0, 1.0, n + 1)
-        z = terrain.sample(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
-        known = np.isfinite(z)
-        clearance = float(altitude_m - np.max(z[known])) if known.any() else math.nan
-        unknown = float((~known).sum() / (n + 1) * length)
-        legs.append(Leg(names[i], names[i + 1], length, clearance, unknown))
-    return tuple(legs)
+    """The terrain clearance of every leg of ``path_xy`` flown level at ``altitude_m``, exact
+    on the DEM's bilinear surface (:func:`urpt_gcs.segments.segment_profile`)."""
+    a = np.column_stack([path_xy[:-1], np.full(len(path_xy) - 1, altitude_m)])
+    b = np.column_stack([path_xy[1:], np.full(len(path_xy) - 1, altitude_m)])
+    profile = segment_profile(terrain, a, b)
+    lengths = np.hypot(*(path_xy[1:] - path_xy[:-1]).T)
+    return tuple(
+        Leg(
+            names[i],
+            names[i + 1],
+            float(lengths[i]),
+            -float(profile.excess_m[i]) if math.isfinite(profile.excess_m[i]) else math.nan,
+            float(profile.unknown_fraction[i] * lengths[i]),
+        )
+        for i in range(len(path_xy) - 1)
+    )
 
 
 def check_legs(legs: tuple[Leg, ...], min_clearance_m: float) -> list[str]:

@@ -26,6 +26,7 @@ import shapely
 from shapely.geometry import Polygon
 
 from urpt_gcs.errors import SettingsError
+from urpt_gcs.segments import clear_of_terrain
 from urpt_gcs.terrain import FloatArray, Terrain
 
 BoolArray = npt.NDArray[np.bool_]
@@ -222,40 +223,7 @@ def line_of_sight(
 ) -> BoolArray:
     """Whether each straight segment ``eye -> target`` clears the terrain.
 
-    Samples strictly between the ends, where the segment crosses the lines through pixel
-    centres and every half cell in between (as :func:`ray_reach` does); a sample is blocked
-    when the bilinear terrain there is above the segment or unknown.
+    Exact on the DEM's bilinear surface (:func:`urpt_gcs.segments.clear_of_terrain`): blocked
+    when the terrain rises above the segment anywhere, or the segment crosses unknown ground.
     """
-    step = terrain.cell_m / 2.0
-    eye = np.asarray(eye_xyz, dtype=np.float64).reshape(-1, 3)
-    tgt = np.asarray(target_xyz, dtype=np.float64).reshape(-1, 3)
-    clear = np.ones(len(eye), dtype=bool)
-    dx, dy = eye[:, 0] - tgt[:, 0], eye[:, 1] - tgt[:, 1]
-    length = np.hypot(dx, dy)
-    if len(eye) == 0 or float(length.max()) <= 0.0:
-        return clear
-    # Sort by length so each chunk pads to a similar number of samples.
-    order = np.argsort(length)
-    for lo in range(0, len(order), 4096):
-        idx = order[lo : lo + 4096]
-        longest = float(length[idx].max())
-        if longest <= 0.0:
-            continue
-        n_uniform = max(math.ceil(longest / step), 1)
-        n_cross = math.ceil(longest / terrain.cell_m) + 2
-        sub = max(_CHUNK_SAMPLES // (n_uniform + 2 * n_cross + 1), 1)
-        for lo2 in range(0, len(idx), sub):
-            j = idx[lo2 : lo2 + sub]
-            seg = np.maximum(length[j], 1e-12)
-            ux, uy = dx[j] / seg, dy[j] / seg
-            x0, y0 = tgt[j, 0], tgt[j, 1]
-            cross = _grid_crossings(terrain, x0, y0, ux, uy, n_cross)
-            uniform = np.arange(1, n_uniform + 1, dtype=np.float64) * step
-            s = np.concatenate([np.broadcast_to(uniform, (len(j), n_uniform)), cross], axis=-1)
-            s = np.where((s > 0.0) & (s < seg[:, None]), s, np.nan)
-            z_line = tgt[j, 2, None] + (eye[j, 2, None] - tgt[j, 2, None]) * (s / seg[:, None])
-            with np.errstate(invalid="ignore"):
-                z = terrain.sample(x0[:, None] + ux[:, None] * s, y0[:, None] + uy[:, None] * s)
-                blocked = ~np.isnan(s) & ~(z <= z_line)  # NaN ground (unknown) blocks
-            clear[j] = ~blocked.any(axis=1)
-    return clear
+    return clear_of_terrain(terrain, eye_xyz, target_xyz)

@@ -7,7 +7,8 @@ positions are those CAMERA_FEEDBACK reported, at the altitude above home it repo
 planned home's ground elevation, so the DEM's vertical datum cancels out as in planning.
 
 Clearance is measured along the cruise legs: between consecutive GLOBAL_POSITION_INT fixes
-at the flight plane's altitude, the straight segment is sampled every half cell.
+at the flight plane's altitude, the straight segment's least height above the DEM's bilinear
+surface, exactly (:func:`urpt_gcs.segments.segment_profile`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.mission import Mission
+from urpt_gcs.segments import segment_profile
 from urpt_gcs.targets import read_targets
 from urpt_gcs.terrain import WGS84, FloatArray, Terrain, open_dem, planning_crs, read_terrain
 from urpt_gcs.visibility import line_of_sight
@@ -169,20 +171,14 @@ def _min_clearance(
     cruise = np.array(
         [p.alt_rel_m >= mission.altitude_rel_m - CRUISE_BAND_M for p in flight.track], dtype=bool
     )
-    step = terrain.cell_m / 2.0
-    least = math.inf
-    for k in range(len(flight.track) - 1):
-        if not (cruise[k] and cruise[k + 1]):
-            continue
-        a, b = track_xy[k], track_xy[k + 1]
-        n = max(math.ceil(float(np.hypot(*(b - a))) / step), 1)
-        t = np.linspace(0.0, 1.0, n + 1)
-        ground = terrain.sample(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
-        line = track_z[k] + (track_z[k + 1] - track_z[k]) * t
-        known = np.isfinite(ground)
-        if known.any():
-            least = min(least, float(np.min(line[known] - ground[known])))
-    return None if math.isinf(least) else least
+    legs = np.flatnonzero(cruise[:-1] & cruise[1:])
+    if legs.size == 0:
+        return None
+    a = np.column_stack([track_xy[legs], track_z[legs]])
+    b = np.column_stack([track_xy[legs + 1], track_z[legs + 1]])
+    excess = segment_profile(terrain, a, b).excess_m
+    known = np.isfinite(excess)
+    return float(-excess[known].max()) if known.any() else None
 
 
 def report_text(report: ReplayReport) -> str:

@@ -64,6 +64,11 @@ def main() -> None:
         crs="EPSG:4326",
         transform=from_origin(5.9, 47.1, 0.001, 0.001),
     )
+    # Flat ground at 100 m in 10 m cells with a wall one pixel wide rising to 165 m, for
+    # thin_wall.csv: West and East lie 60 m either side of it.
+    wall = np.full((40, 40), 100.0)
+    wall[:, 20] = 165.0
+    _tif("dem_thin_wall.tif", wall, transform=from_origin(*DEMO_ORIGIN, 10.0, 10.0))
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w") as kmz:
         kmz.writestr("images/readme.txt", "no KML in here\n")
