@@ -202,6 +202,8 @@ def _compound_wkt(unit: str) -> str:
         ("EPSG:2229+6360", "US survey foot", US_SURVEY_FOOT_M, True),
         ("EPSG:4979", "metre", 1.0, True),
         (_compound_wkt('UNIT["furlong",201.168]'), "furlong", 201.168, True),
+        # A datum shift bound to the CRS (how GDAL reads +towgs84): the axes are the source's.
+        ("+proj=utm +zone=32 +ellps=intl +towgs84=1,2,3 +vunits=ft", "foot", FOOT_M, True),
     ],
 )
 def test_vertical_unit_is_read_from_the_crs(

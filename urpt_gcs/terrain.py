@@ -172,6 +172,9 @@ def _horizontal(crs: pyproj.CRS) -> pyproj.CRS:
 
 def _vertical_axis_unit(crs: pyproj.CRS) -> tuple[str, float, bool] | None:
     """(name, factor to metres, whether it is a length) of the height axis, if there is one."""
+    if crs.is_bound and crs.source_crs is not None:
+        # A datum shift (TOWGS84) wrapped around the CRS; the axes are the source's.
+        crs = crs.source_crs
     if crs.is_compound:
         verticals = [sub for sub in crs.sub_crs_list if sub.is_vertical]
         if not verticals:
