@@ -74,7 +74,11 @@ ASSUMED_METRES = VerticalUnit("metre", 1.0, declared=False)
 
 @dataclass(frozen=True, slots=True)
 class DemInfo:
-    """What is known about a raster before any pixel is read."""
+    """What is known about a raster before any pixel is read.
+
+    ``band`` is the band read as elevation (from 1); ``dtype`` and ``nodata`` are that band's.
+    ``vertical_unit`` is what its values are in; :func:`read_terrain` returns them in metres.
+    """
 
     path: Path
     crs: pyproj.CRS
