@@ -133,6 +133,26 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["cuts 5.0 m into the terrain", "raise --altitude"],
     ),
     "fov_narrower_than_waypoint_grid": (["--fov", "0.001"], ["--fov 0.001", "1e-7 degree"]),
+    "dem_complex": (
+        ["--dem", str(BAD / "dem_complex.tif")],
+        ["dem_complex.tif", "complex numbers", "real-valued band"],
+    ),
+    "dem_multiband": (
+        ["--dem", str(BAD / "dem_multiband.tif")],
+        ["dem_multiband.tif", "has 2 bands", "--band N (1 to 2)"],
+    ),
+    "dem_band_out_of_range": (
+        ["--dem", str(BAD / "dem_multiband.tif"), "--band", "3"],
+        ["dem_multiband.tif", "no band 3", "--band 1 to 2"],
+    ),
+    "dem_vertical_unit_not_a_length": (
+        ["--dem", str(BAD / "dem_vertical_unit_not_a_length.tif")],
+        ["dem_vertical_unit_not_a_length.tif", "'degree', not a length", "gdal_edit.py -a_srs"],
+    ),
+    "dem_below_minus_1000": (
+        ["--dem", str(BAD / "dem_below_minus_1000.tif")],
+        ["dem_below_minus_1000.tif", "valid range [-1000, 9000] m", "vertical unit", "nodata"],
+    ),
 }
 
 

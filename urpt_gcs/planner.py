@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
-from urpt_gcs.errors import DemError, PlanError, SettingsError, TargetsError
+from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance, cover_sets
 from urpt_gcs.mission import (
     GeoPoint,
@@ -42,7 +42,7 @@ from urpt_gcs.terrain import (
     DemInfo,
     FloatArray,
     Terrain,
-    has_any_data,
+    check_elevations,
     open_dem,
     planning_crs,
     read_terrain,
@@ -76,6 +76,7 @@ class PlanSettings:
     strict: bool = False
     endurance_min: float | None = 20.0
     geofence_margin_m: float = 30.0
+    band: int | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
@@ -117,6 +118,8 @@ class PlanSettings:
                 and -180 <= lon <= 180
             ):
                 raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees")
+        if self.band is not None and self.band < 1:
+            raise SettingsError(f"--band {self.band} is below 1: bands are numbered from 1")
 
 
 @dataclass(frozen=True, slots=True)
@@ -202,11 +205,7 @@ def _check_ground(
     bad = np.flatnonzero(~np.isfinite(ground))
     if bad.size == 0:
         return ground
-    if not has_any_data(info):
-        raise DemError(
-            f"DEM '{info.path}' holds no elevation at all (every cell is nodata): "
-            "export the DSM again"
-        )
+    check_elevations(info)
     i = int(bad[0])
     lat, lon = lat_lon[i]
     to_src = pyproj.Transformer.from_crs(WGS84, info.horizontal_crs, always_xy=True)
@@ -261,7 +260,7 @@ def plan(
 
     say("reading targets")
     targets = read_targets(targets_path)
-    info = open_dem(dem_path)
+    info = open_dem(dem_path, settings.band)
     home_lat, home_lon, home_source = _pick_home(targets, settings)
     names = [t.name for t in targets.targets]
     lat_lon = [(t.lat_deg, t.lon_deg) for t in targets.targets]

@@ -90,6 +90,12 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
             "cell_m": round(plan.terrain.cell_m, 4),
             "read_window_px": list(plan.terrain.read_window_px),
             "source_shape_px": list(plan.terrain.source_shape_px),
+            "source_crs": plan.dem.crs.name,
+            "band": plan.dem.band,
+            "vertical_unit": plan.dem.vertical_unit.name,
+            "vertical_unit_to_m": plan.dem.vertical_unit.to_m,
+            "vertical_unit_declared": plan.dem.vertical_unit.declared,
+            "planned_in_source_crs": plan.crs == plan.dem.horizontal_crs,
         },
         "min_leg_clearance_m": _round(
             min((leg.min_clearance_m for leg in plan.legs), default=math.nan)
@@ -118,6 +124,22 @@ def _minutes(seconds: float) -> str:
     return f"{m} min {s:02d} s"
 
 
+def _dem_line(dem: dict[str, Any]) -> str:
+    unit = str(dem["vertical_unit"])
+    if not dem["vertical_unit_declared"]:
+        heights = "DEM heights in metres (no vertical CRS declared)"
+    elif dem["vertical_unit_to_m"] != 1.0:
+        factor = dem["vertical_unit_to_m"]
+        named = f"{unit[: -len('foot')]}feet" if unit.endswith("foot") else f"{unit} ({factor:g} m)"
+        heights = f"DEM heights in {named}, converted to metres"
+    else:
+        heights = "DEM heights in metres"
+    where = f"planned in {dem['crs']}"
+    if not dem["planned_in_source_crs"]:
+        where += f" (the DEM is in {dem['source_crs']})"
+    return f"dem            {heights}; band {dem['band']}; {where}"
+
+
 def summary_text(data: dict[str, Any]) -> str:
     """One screen of text from :func:`summary`'s dictionary."""
     if data["proven_optimal"]:
@@ -144,6 +166,7 @@ def summary_text(data: dict[str, Any]) -> str:
         f" above home; highest terrain {data['terrain_max_m']:.1f} m",
         f"camera         half-angle {data['fov_deg']:g} deg, {data['samples']} azimuths",
         f"home           {home['lat_deg']:.7f}, {home['lon_deg']:.7f} ({home['source']})",
+        _dem_line(data["dem"]),
         f"clearance      at least {data['min_leg_clearance_m']} m over terrain on every leg",
         f"firmware       {data['firmware']}",
     ]

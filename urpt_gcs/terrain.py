@@ -1,12 +1,16 @@
 """Terrain: the part of a DSM/DEM GeoTIFF that a plan needs, in a metric projected CRS.
 
-A raster in a projected CRS with metre units is read as is (a compound CRS such as
-UTM + EGM2008 height is fine: its horizontal part is used). A raster in geographic
-coordinates, or projected in other units, is georeferenced in the UTM zone of the targets: the
-window read keeps its own pixels (no resampling, so its bilinear surface is exactly the
+A raster in a projected CRS with metre units whose scale at the site is within 0.1 % of true
+is read as is (a compound CRS such as UTM + EGM2008 height is fine: its horizontal part is
+used). A raster in geographic coordinates, projected in other units, or in a projection that
+stretches lengths at the site (Web Mercator) is georeferenced in the UTM zone of the targets:
+the window read keeps its own pixels (no resampling, so its bilinear surface is exactly the
 source's) and gets the affine map from its pixels to UTM that fits the true projection over
 the window, to a small fraction of a cell (checked on read).
 Only a window is ever read: :func:`read_terrain` takes the area of interest in the planning CRS.
+
+Heights are converted to metres on read, from the unit of the CRS's vertical axis (feet, US
+survey feet, ...). A raster without a vertical CRS is taken to be in metres, as Pix4D writes it.
 
 Cells that are nodata (declared nodata, NaN, or an elevation no place on Earth has) become
 NaN and are never used as an elevation: any bilinear sample touching one is NaN, and every
@@ -37,12 +41,44 @@ FloatArray = npt.NDArray[np.float64]
 # Beyond these no terrain on Earth exists; such values are undeclared nodata fill.
 MIN_VALID_ELEVATION_M = -1000.0
 MAX_VALID_ELEVATION_M = 9000.0
+# A projection whose scale at the site is off by more than this (Web Mercator: 49 % at 47.7 N)
+# is planned in UTM instead; UTM's own 0.9996 on its central meridian stays native.
+MAX_SCALE_ERROR = 1e-3
 WGS84 = pyproj.CRS.from_epsg(4326)
 
 
 @dataclass(frozen=True, slots=True)
+class VerticalUnit:
+    """The unit a raster's heights are stored in.
+
+    ``to_m`` converts a stored value to metres; ``declared`` is False when the CRS has no
+    vertical axis and metres are assumed.
+    """
+
+    name: str
+    to_m: float
+    declared: bool
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.to_m) and self.to_m > 0.0):
+            raise ValueError("VerticalUnit.to_m must be a positive number")
+
+    @property
+    def converted(self) -> bool:
+        """Whether stored heights are multiplied on read (they are not in metres)."""
+        return self.to_m != 1.0
+
+
+ASSUMED_METRES = VerticalUnit("metre", 1.0, declared=False)
+
+
+@dataclass(frozen=True, slots=True)
 class DemInfo:
-    """What is known about a raster before any pixel is read."""
+    """What is known about a raster before any pixel is read.
+
+    ``band`` is the band read as elevation (from 1); ``dtype`` and ``nodata`` are that band's.
+    ``vertical_unit`` is what its values are in; :func:`read_terrain` returns them in metres.
+    """
 
     path: Path
     crs: pyproj.CRS
@@ -52,10 +88,13 @@ class DemInfo:
     transform: Affine
     dtype: str
     nodata: float | None
+    band: int = 1
+    vertical_unit: VerticalUnit = ASSUMED_METRES
 
     @property
     def needs_warp(self) -> bool:
-        """True unless the raster is already projected in metres."""
+        """True unless the raster is projected in metres (whether its scale at the site is
+        close enough to true is for :func:`planning_crs` to say)."""
         return not _is_metric_projected(self.horizontal_crs)
 
 
@@ -135,8 +174,68 @@ def _horizontal(crs: pyproj.CRS) -> pyproj.CRS:
     return crs
 
 
-def open_dem(path: Path) -> DemInfo:
-    """Check that ``path`` is a usable elevation raster and describe it without reading pixels."""
+def _vertical_axis_unit(crs: pyproj.CRS) -> tuple[str, float, bool] | None:
+    """(name, factor to metres, whether it is a length) of the height axis, if there is one."""
+    if crs.is_bound and crs.source_crs is not None:
+        # A datum shift (TOWGS84) wrapped around the CRS; the axes are the source's.
+        crs = crs.source_crs
+    if crs.is_compound:
+        verticals = [sub for sub in crs.sub_crs_list if sub.is_vertical]
+        if not verticals:
+            return None
+        cs, axis_index = verticals[0], 0
+    elif len(crs.axis_info) == 3:
+        cs, axis_index = crs, 2
+    else:
+        return None
+    axis = cs.axis_info[axis_index]
+    # PROJ JSON names the unit's kind; pyproj's Axis does not.
+    unit = cs.to_json_dict()["coordinate_system"]["axis"][axis_index]["unit"]
+    is_length = unit == "metre" or (isinstance(unit, dict) and unit.get("type") == "LinearUnit")
+    return axis.unit_name, float(axis.unit_conversion_factor), is_length
+
+
+def vertical_unit(crs: pyproj.CRS, source: str) -> VerticalUnit:
+    """The unit of the heights of a raster in ``crs``; metres when it declares none.
+
+    Raises
+    ------
+    DemError
+        When the vertical axis's unit is unknown or not a length.
+    """
+    found = _vertical_axis_unit(crs)
+    if found is None:
+        return ASSUMED_METRES
+    name, to_m, is_length = found
+    if not is_length or name.lower() == "unknown" or not (math.isfinite(to_m) and to_m > 0.0):
+        horizontal = _horizontal(crs).to_epsg()
+        example = f"EPSG:{horizontal}+5773" if horizontal is not None else "EPSG:<h>+5773"
+        kind = "an unknown unit" if name.lower() == "unknown" else f"'{name}', not a length"
+        raise DemError(
+            f"DEM '{source}' declares its heights in {kind}: give it a vertical CRS in metres "
+            f"or feet (e.g. gdal_edit.py -a_srs {example}, EGM96 height in metres)"
+        )
+    if abs(to_m - 1.0) < 1e-12:
+        return VerticalUnit("metre", 1.0, declared=True)
+    return VerticalUnit(name, to_m, declared=True)
+
+
+def open_dem(path: Path, band: int | None = None) -> DemInfo:
+    """Check that ``path`` is a usable elevation raster and describe it without reading pixels.
+
+    Parameters
+    ----------
+    path
+        The GeoTIFF DSM/DEM.
+    band
+        The band (from 1) holding the elevations; may be omitted for a single-band raster.
+
+    Raises
+    ------
+    DemError
+        When the raster cannot be used: missing, unreadable, without CRS, rotated, several
+        bands and none named, a complex band, or heights in a unit that is not a length.
+    """
     name = str(path)
     if not path.exists():
         raise DemError(f"DEM '{name}' does not exist: check the path given to --dem")
@@ -151,6 +250,13 @@ def open_dem(path: Path) -> DemInfo:
                 )
             if src.count < 1:
                 raise DemError(f"DEM '{name}' has no raster band: export the DSM again")
+            chosen = _pick_band(name, src.count, band)
+            dtype = src.dtypes[chosen - 1]
+            if np.issubdtype(np.dtype(dtype), np.complexfloating):
+                raise DemError(
+                    f"DEM '{name}' band {chosen} holds complex numbers ({dtype}), not "
+                    "elevations: export the DSM as a real-valued band (e.g. float32)"
+                )
             transform = src.transform
             if transform.b != 0.0 or transform.d != 0.0 or transform.e >= 0.0:
                 raise DemError(
@@ -158,7 +264,7 @@ def open_dem(path: Path) -> DemInfo:
                     "(gdalwarp) before planning"
                 )
             crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
-            nodata = src.nodata
+            nodata = src.nodatavals[chosen - 1]
             return DemInfo(
                 path=path,
                 crs=crs,
@@ -166,8 +272,10 @@ def open_dem(path: Path) -> DemInfo:
                 width_px=src.width,
                 height_px=src.height,
                 transform=transform,
-                dtype=src.dtypes[0],
+                dtype=dtype,
                 nodata=None if nodata is None else float(nodata),
+                band=chosen,
+                vertical_unit=vertical_unit(crs, name),
             )
     except rasterio.errors.RasterioIOError as exc:
         raise DemError(
@@ -177,19 +285,68 @@ def open_dem(path: Path) -> DemInfo:
         raise DemError(f"DEM '{name}' cannot be used ({_first_line(exc)})") from exc
 
 
+def _pick_band(name: str, count: int, band: int | None) -> int:
+    if band is None:
+        if count > 1:
+            raise DemError(
+                f"DEM '{name}' has {count} bands: name the one holding the elevations "
+                f"with --band N (1 to {count})"
+            )
+        return 1
+    if not 1 <= band <= count:
+        bands = "1 band" if count == 1 else f"{count} bands"
+        raise DemError(
+            f"DEM '{name}' has {bands}, so there is no band {band}: give --band 1 to {count}"
+        )
+    return band
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
 
 
+def scale_error(crs: pyproj.CRS, lon_lat_bounds: tuple[float, float, float, float]) -> float:
+    """How far lengths in the projected ``crs`` are from true over a lon/lat box: the largest
+    ``|scale - 1|`` in any direction (Tissot's semi-axes) at its corners and centre.
+
+    An infinite result means the projection cannot be evaluated there.
+    """
+    west, south, east, north = lon_lat_bounds
+    lons = np.array([west, east, west, east, (west + east) / 2.0])
+    lats = np.array([south, south, north, north, (south + north) / 2.0])
+    try:
+        factors = pyproj.Proj(crs).get_factors(lons, lats, errcheck=True)
+    except pyproj.exceptions.ProjError:
+        return math.inf
+    semi = np.concatenate(
+        [np.atleast_1d(factors.tissot_semimajor), np.atleast_1d(factors.tissot_semiminor)]
+    )
+    if not np.isfinite(semi).all():
+        return math.inf
+    return float(np.max(np.abs(semi - 1.0)))
+
+
 def planning_crs(info: DemInfo, lon_lat_bounds: tuple[float, float, float, float]) -> pyproj.CRS:
     """The metric CRS plans are made in: the DEM's own, or the UTM zone of the points.
 
-    ``lon_lat_bounds`` is (west, south, east, north) of the targets and home. A geographic DEM
-    whose points straddle a UTM zone edge is refused: one flat map would distort one side.
+    ``lon_lat_bounds`` is (west, south, east, north) of the targets and home. The DEM's own CRS
+    is used when it is projected in metres and true to scale there (see ``MAX_SCALE_ERROR``);
+    otherwise the plan is made in UTM. A DEM whose points straddle a UTM zone edge is then
+    refused: one flat map would distort one side.
     """
+    hcrs = info.horizontal_crs
     if not info.needs_warp:
-        return info.horizontal_crs
+        error = scale_error(hcrs, lon_lat_bounds)
+        if error <= MAX_SCALE_ERROR:
+            return hcrs
+        reason = f"is in {hcrs.name}, whose scale at the site is off by " + (
+            f"{100.0 * error:.1f} %" if math.isfinite(error) else "an unknown amount"
+        )
+    elif hcrs.is_geographic:
+        reason = "is geographic"
+    else:
+        reason = f"is projected in units of {hcrs.axis_info[0].unit_name}"
     west, south, east, north = lon_lat_bounds
     zones = query_utm_crs_info(
         datum_name="WGS 84",
@@ -199,21 +356,23 @@ def planning_crs(info: DemInfo, lon_lat_bounds: tuple[float, float, float, float
     zones = [z for z in zones if z.name.endswith(hemisphere)]
     if not zones:
         raise DemError(
-            f"DEM '{info.path}' is geographic and no UTM zone covers the targets: "
+            f"DEM '{info.path}' {reason} and no UTM zone covers the targets: "
             "reproject it to a local metric CRS first"
         )
     if len(zones) > 1:
         names = " and ".join(z.name.rsplit(" ", 1)[-1] for z in zones[:2])
         raise DemError(
-            f"DEM '{info.path}' is geographic and the targets straddle UTM zones {names}: "
+            f"DEM '{info.path}' {reason} and the targets straddle UTM zones {names}: "
             "plan each side separately, or reproject the DEM to one projected CRS (gdalwarp)"
         )
     return pyproj.CRS.from_authority(zones[0].auth_name, zones[0].code)
 
 
-def _clean(values: npt.NDArray[np.generic], mask: npt.NDArray[np.bool_]) -> FloatArray:
+def _clean(values: npt.NDArray[np.generic], mask: npt.NDArray[np.bool_], to_m: float) -> FloatArray:
     z = values.astype(np.float64)
     z[mask] = np.nan
+    if to_m != 1.0:
+        z *= to_m
     z[(z < MIN_VALID_ELEVATION_M) | (z > MAX_VALID_ELEVATION_M)] = np.nan
     return z
 
@@ -236,10 +395,10 @@ def read_terrain(
     Returns
     -------
     Terrain
-        The elevations of the window; nodata as NaN.
+        The elevations of the window in metres; nodata as NaN.
     """
     try:
-        if info.needs_warp:
+        if info.needs_warp or crs != info.horizontal_crs:
             return _read_warped(info, crs, area)
         return _read_native(info, area)
     except rasterio.errors.RasterioError as exc:
@@ -274,8 +433,8 @@ def _read_window(
             "belong to this site"
         )
     with rasterio.open(info.path) as src:
-        band = src.read(1, window=window, masked=True)
-    return window, _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
+        band = src.read(info.band, window=window, masked=True)
+    return window, _clean(np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m)
 
 
 def _window_px(window: rasterio.windows.Window) -> tuple[int, int, int, int]:
@@ -337,14 +496,38 @@ def _fit_affine(
     return Affine(float(a), float(b), float(c), float(d), float(e), float(f)), error
 
 
-def has_any_data(info: DemInfo) -> bool:
-    """Whether the raster holds any valid elevation, from a decimated read (small in memory)."""
+def check_elevations(info: DemInfo) -> None:
+    """Refuse a raster that holds no valid elevation, saying why, from a decimated read (small
+    in memory).
+
+    Raises
+    ------
+    DemError
+        When every cell is nodata, or every value lies outside the range terrain on Earth has
+        (after conversion to metres): a wrong vertical unit or an undeclared nodata value.
+    """
     scale = max(info.width_px, info.height_px) / 512.0
     shape = (
         max(int(info.height_px / max(scale, 1.0)), 1),
         max(int(info.width_px / max(scale, 1.0)), 1),
     )
     with rasterio.open(info.path) as src:
-        band = src.read(1, out_shape=shape, masked=True)
-    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band))
-    return bool(np.isfinite(z).any())
+        band = src.read(info.band, out_shape=shape, masked=True)
+    unit = info.vertical_unit
+    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band), unit.to_m)
+    if np.isfinite(z).any():
+        return
+    values = np.ma.getdata(band)[~np.ma.getmaskarray(band)].astype(np.float64) * unit.to_m
+    values = values[~np.isnan(values)]
+    if values.size == 0:
+        raise DemError(
+            f"DEM '{info.path}' holds no elevation at all (every cell is nodata): "
+            "export the DSM again"
+        )
+    converted = f", converted from {unit.name}" if unit.converted else ""
+    raise DemError(
+        f"DEM '{info.path}' holds no elevation in the valid range "
+        f"[{MIN_VALID_ELEVATION_M:g}, {MAX_VALID_ELEVATION_M:g}] m (its values run from "
+        f"{float(values.min()):.6g} to {float(values.max()):.6g} m{converted}): check its "
+        "vertical unit and its nodata value"
+    )

@@ -22,6 +22,12 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
 @click.option(
     "--targets", "targets", required=True, help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon)."
 )
+@click.option(
+    "--band",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Band of the DEM holding the elevations; needed when it has several.",
+)
 @click.option("--out", "out", default="out", show_default=True, help="Folder for the outputs.")
 @click.option(
     "--fov",
@@ -131,6 +137,7 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
 def plan_command(
     dem: str,
     targets: str,
+    band: int | None,
     out: str,
     fov: float,
     samples: int,
@@ -171,6 +178,7 @@ def plan_command(
             strict=strict,
             endurance_min=endurance,
             home=parse_home(home),
+            band=band,
             solver=solver,
             solve=SolveSettings(time_limit_s=time_limit, seed=seed),
             mission=MissionSettings(

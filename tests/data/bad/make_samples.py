@@ -8,6 +8,7 @@ Text samples are written by hand; these are binary, so they are made here.
 from __future__ import annotations
 
 import io
+import struct
 import zipfile
 from pathlib import Path
 
@@ -37,6 +38,31 @@ def _tif(name: str, z: np.ndarray, **profile: object) -> bytes:
     with rasterio.open(path, "w", **base) as dst:
         dst.write(z.astype(base["dtype"]), 1)
     return path.read_bytes()
+
+
+def _set_geokeys(name: str, keys: dict[int, int]) -> None:
+    """Set short-valued GeoTIFF keys of a little-endian TIFF written by GDAL, as a writer that
+    GDAL would correct might have stored them. The key directory is rewritten at the end of the
+    file and its tag pointed there."""
+    path = HERE / name
+    data = bytearray(path.read_bytes())
+    (ifd,) = struct.unpack_from("<I", data, 4)
+    (count,) = struct.unpack_from("<H", data, ifd)
+    for i in range(count):
+        entry = ifd + 2 + 12 * i
+        tag, _, n, offset = struct.unpack_from("<HHII", data, entry)
+        if tag == 34735:  # GeoKeyDirectoryTag
+            break
+    old = struct.unpack_from(f"<{n}H", data, offset)
+    entries = {old[i]: list(old[i + 1 : i + 4]) for i in range(4, n, 4)}
+    entries.update({key: [0, 1, value] for key, value in keys.items()})
+    directory = [*old[:3], len(entries)]
+    for key in sorted(entries):
+        directory += [key, *entries[key]]
+    data += b"\0" * (len(data) % 2)
+    struct.pack_into("<HHII", data, entry, 34735, 3, len(directory), len(data))
+    data += struct.pack(f"<{len(directory)}H", *directory)
+    path.write_bytes(data)
 
 
 def main() -> None:
@@ -69,6 +95,36 @@ def main() -> None:
     wall = np.full((40, 40), 100.0)
     wall[:, 20] = 165.0
     _tif("dem_thin_wall.tif", wall, transform=from_origin(*DEMO_ORIGIN, 10.0, 10.0))
+    _tif(
+        "dem_complex.tif",
+        np.full((100, 100), 420.0) + 1j * np.full((100, 100), 0.5),
+        dtype="complex64",
+        compress="deflate",
+    )
+    two = np.stack([np.full((100, 100), 0.9), np.full((100, 100), 420.0)])
+    with rasterio.open(
+        HERE / "dem_multiband.tif",
+        "w",
+        driver="GTiff",
+        height=100,
+        width=100,
+        count=2,
+        dtype="float32",
+        crs="EPSG:32632",
+        transform=from_origin(*DEMO_ORIGIN, 5.0, 5.0),
+        compress="deflate",
+    ) as dst:
+        dst.write(two.astype("float32"))
+    # A slope with a wrong offset: every value below -1000 m, none of them the fill value.
+    _tif(
+        "dem_below_minus_1000.tif",
+        -1400.0 - 0.5 * np.indices((100, 100))[0],
+        nodata=-32768.0,
+        compress="deflate",
+    )
+    # Vertical CRS "user-defined" with VerticalUnitsGeoKey 9102, the EPSG code of the degree.
+    _tif("dem_vertical_unit_not_a_length.tif", flat, crs="EPSG:32632+5773", compress="deflate")
+    _set_geokeys("dem_vertical_unit_not_a_length.tif", {4096: 32767, 4099: 9102})
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w") as kmz:
         kmz.writestr("images/readme.txt", "no KML in here\n")
