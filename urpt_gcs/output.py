@@ -157,7 +157,7 @@ def commit(writes: Sequence[tuple[Destination, Mapping[str, Content]]]) -> list[
         try:
             for stage in stages:
                 current = stage.dest
-                stage.prepare()
+                stage.prepare(guard)
             with guard.held():
                 for stage in stages:
                     current = stage.dest
@@ -240,8 +240,9 @@ def _check(
                             f"move it or choose another {flag}",
                         )
     try:
-        probe = tempfile.mkdtemp(prefix=".urpt-probe-", dir=existing)
-        os.rmdir(probe)
+        # Held, so that Ctrl-C cannot fall between making the probe and removing it.
+        with _interrupts() as guard, guard.held():
+            os.rmdir(tempfile.mkdtemp(prefix=".urpt-probe-", dir=existing))
     except OSError as exc:
         raise _refused(flag, subject, f"{problem} not writable ({exc.strerror or exc})") from exc
 
@@ -310,22 +311,24 @@ class _Stage:
     def folder(self) -> Path:
         return Path(os.path.abspath(self.dest.folder))
 
-    def prepare(self) -> None:
+    def prepare(self, guard: _Interrupts) -> None:
         folder = self.folder
-        if os.path.isdir(folder):
-            self.staging = _new_folder(folder, NEW_PREFIX, 0o700)
-            self.earlier = _new_folder(folder, OLD_PREFIX, 0o700)
-        else:
-            missing = []
-            parent = folder.parent
-            while not os.path.lexists(parent):
-                missing.append(parent)
-                parent = parent.parent
-            for path in reversed(missing):
-                os.mkdir(path)
-                self.created.append(path)
-            # Renamed into place as the destination itself, so it gets a new folder's mode.
-            self.staging = _new_folder(folder.parent, NEW_PREFIX, 0o777)
+        # Held: a folder made but not yet recorded could not be removed on an interrupt.
+        with guard.held():
+            if os.path.isdir(folder):
+                self.staging = _new_folder(folder, NEW_PREFIX, 0o700)
+                self.earlier = _new_folder(folder, OLD_PREFIX, 0o700)
+            else:
+                missing = []
+                parent = folder.parent
+                while not os.path.lexists(parent):
+                    missing.append(parent)
+                    parent = parent.parent
+                for path in reversed(missing):
+                    os.mkdir(path)
+                    self.created.append(path)
+                # Renamed into place as the destination itself: a new folder's mode.
+                self.staging = _new_folder(folder.parent, NEW_PREFIX, 0o777)
         for name, content in self.files.items():
             data = content.encode("utf-8") if isinstance(content, str) else content
             # O_EXCL in a folder of our own; 0o666 less the umask, as for any new file.
