@@ -1,11 +1,15 @@
 """The bad-input catalogue: every sample in tests/data/bad/ named after the failure it causes.
 
 Each case: exit status 1, exactly one line on stderr naming the input and what to do, no
-traceback, and nothing written to the output folder.
+traceback, and nothing written: run once with no --out yet (it is not created) and once with
+an --out holding an earlier plan's outputs (they are left byte for byte, and nothing else
+appears beside them). ``{tmp}`` in a case's arguments is that run's own folder.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -153,21 +157,57 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--dem", str(BAD / "dem_below_minus_1000.tif")],
         ["dem_below_minus_1000.tif", "valid range [-1000, 9000] m", "vertical unit", "nodata"],
     ),
+    "out_inside_a_file": (
+        ["--out", str(BAD / "output_folder_is_a_file" / "out")],
+        ["output_folder_is_a_file", "is a file, not a folder", "--out"],
+    ),
+    "out_name_too_long": (
+        ["--out", "{tmp}/" + "x" * 300],
+        ["--out", "a name of 300 bytes", "choose a shorter --out"],
+    ),
+    "out_path_too_long": (
+        ["--out", "{tmp}/" + "/".join(["y" * 200] * 25)],
+        ["--out", "bytes long", "choose a shorter --out"],
+    ),
+    # sysfs refuses new entries even to root.
+    "export_gtsp_unwritable": (
+        ["--export-gtsp", "/sys/urpt-gcs.gtsp"],
+        ["--export-gtsp", "/sys/urpt-gcs.gtsp", "'/sys' is not writable"],
+    ),
+    "export_gtsp_folder_uncreatable": (
+        ["--export-gtsp", "/sys/urpt-gcs/demo.gtsp"],
+        ["--export-gtsp", "cannot be created", "'/sys' is not writable"],
+    ),
+    "export_gtsp_inside_a_file": (
+        ["--export-gtsp", str(BAD / "output_folder_is_a_file" / "demo.gtsp")],
+        ["--export-gtsp", "output_folder_is_a_file", "is a file, not a folder"],
+    ),
+    "export_gtsp_name_too_long": (
+        ["--export-gtsp", "{tmp}/" + "g" * 300 + ".gtsp"],
+        ["--export-gtsp", "a name of 305 bytes"],
+    ),
+    "export_gtsp_is_a_plan_output": (
+        ["--export-gtsp", "{tmp}/out/summary.json"],
+        ["--export-gtsp", "summary.json", "the plan's own outputs"],
+    ),
 }
 
 
-def _expand(args: list[str]) -> list[str]:
+def _expand(args: list[str], tmp: Path) -> list[str]:
     out: list[str] = []
     for arg in args:
         if arg.startswith("@"):
             out += (BAD / arg[1:]).read_text().split()
         else:
-            out.append(arg)
+            out.append(arg.replace("{tmp}", str(tmp)))
     return out
 
 
 def run_case(args: list[str], out: Path) -> tuple[int, str]:
-    """Run `urpt-gcs plan` with the demo site's inputs overridden by ``args``."""
+    """Run `urpt-gcs plan` with the demo site's inputs overridden by ``args``.
+
+    ``{tmp}`` in ``args`` stands for the folder ``out`` is in.
+    """
     full = [
         "plan",
         "--dem",
@@ -179,16 +219,51 @@ def run_case(args: list[str], out: Path) -> tuple[int, str]:
         "--time-limit",
         "0.5",
         "--no-map",
-        *_expand(args),
+        *_expand(args, out.parent),
     ]
     result = CliRunner().invoke(main, full)
     return result.exit_code, result.stderr
 
 
+Snapshot = dict[str, tuple[bytes, int] | str]
+
+
+def snapshot(root: Path) -> Snapshot:
+    """Every entry under ``root``: a file's bytes and mtime, a link's target, or ``<dir>``."""
+    found: Snapshot = {}
+    for path in sorted(root.rglob("*")):
+        key = str(path.relative_to(root))
+        if path.is_symlink():
+            found[key] = f"-> {os.readlink(path)}"
+        elif path.is_dir():
+            found[key] = "<dir>"
+        else:
+            found[key] = (path.read_bytes(), path.stat().st_mtime_ns)
+    return found
+
+
+@pytest.fixture(scope="session")
+def previous_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An --out holding a plan of the demo site, with its map, and a file of the operator's."""
+    out = tmp_path_factory.mktemp("previous") / "out"
+    result = CliRunner().invoke(
+        main,
+        ["plan", "--dem", SITE, "--targets", TARGETS, "--out", str(out), "--time-limit", "0.5"],
+    )
+    assert result.exit_code == 0, result.output
+    (out / "notes.txt").write_text("the operator's own file\n")
+    assert {"mission.plan", "map.png", "summary.json"} <= {p.name for p in out.iterdir()}
+    return out
+
+
+@pytest.mark.parametrize("prior", ["no_out", "previous_out"])
 @pytest.mark.parametrize("case", sorted(PLAN_CASES))
-def test_bad_input(case: str, tmp_path: Path) -> None:
+def test_bad_input(case: str, prior: str, tmp_path: Path, request: pytest.FixtureRequest) -> None:
     args, words = PLAN_CASES[case]
     out = tmp_path / "out"
+    if prior == "previous_out":
+        shutil.copytree(request.getfixturevalue("previous_out"), out, symlinks=True)
+    files_before = snapshot(tmp_path)
     before = sorted(p.name for p in BAD.iterdir())
     code, stderr = run_case(args, out)
     assert code == 1, stderr
@@ -198,7 +273,9 @@ def test_bad_input(case: str, tmp_path: Path) -> None:
     assert "Traceback" not in stderr
     for word in words:
         assert word in lines[0], lines[0]
-    assert not out.exists()
+    if prior == "no_out":
+        assert not out.exists()
+    assert snapshot(tmp_path) == files_before, "an earlier --out or its folder was changed"
     assert sorted(p.name for p in BAD.iterdir()) == before, "a sample folder was written to"
 
 

@@ -164,10 +164,15 @@ def plan_command(
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
     from urpt_gcs.planner import plan
-    from urpt_gcs.products import write_products
+    from urpt_gcs.products import check_extra, check_out, write_products
     from urpt_gcs.report import summary_text
 
     try:
+        # Everything about the outputs that can be known now is checked before the planning.
+        destination = check_out(Path(out))
+        export = None
+        if export_gtsp is not None:
+            export = check_extra(export_gtsp, "--export-gtsp", destination)
         settings = PlanSettings(
             fov_deg=fov,
             samples=samples,
@@ -193,15 +198,14 @@ def plan_command(
                 result = plan(Path(dem), Path(targets), settings, progress=progress)
         else:
             result = plan(Path(dem), Path(targets), settings)
-        comment = f"urpt-gcs plan of {Path(targets).name}"
-        if export_gtsp is not None:
-            from urpt_gcs.formats.gtsplib import export_gtsplib, write_gtsplib
+        also = []
+        if export_gtsp is not None and export is not None:
+            from urpt_gcs.formats.gtsplib import write_gtsplib
 
-            # Refuse an instance GTSPLIB cannot hold before any file is written.
-            write_gtsplib(result.instance, export_gtsp.stem, comment)
-        data = write_products(result, Path(out), with_map=not no_map)
-        if export_gtsp is not None:
-            export_gtsplib(result.instance, export_gtsp, comment=comment)
+            comment = f"urpt-gcs plan of {Path(targets).name}"
+            text = write_gtsplib(result.instance, export_gtsp.stem, comment)
+            also.append((export, {export_gtsp.name: text}))
+        data = write_products(result, destination, with_map=not no_map, also=also)
     except UrptError as exc:
         fail(exc)
         return

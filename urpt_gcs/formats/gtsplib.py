@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from urpt_gcs.errors import OutputError, SettingsError
+from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance, euclidean_matrix
-from urpt_gcs.output import write_all
+from urpt_gcs.output import check_file, commit
 from urpt_gcs.terrain import FloatArray
 from urpt_gcs.visibility import BoolArray
 
@@ -399,12 +399,6 @@ def export_gtsplib(instance: Instance, path: Path, comment: str = "") -> Path:
     OutputError
         The file cannot be written.
     """
+    folder = check_file(path, "--export-gtsp")
     text = write_gtsplib(instance, path.stem, comment)
-    try:
-        return write_all(path.parent, {path.name: text})[0]
-    except OutputError as exc:
-        reason = exc.__cause__.strerror if isinstance(exc.__cause__, OSError) else None
-        raise OutputError(
-            f"--export-gtsp file '{path}' cannot be written ({reason or 'not writable'}): "
-            "choose another path"
-        ) from exc
+    return commit([(folder, {path.name: text})])[0]
