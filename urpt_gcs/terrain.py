@@ -31,6 +31,7 @@ from pyproj.aoi import AreaOfInterest
 from pyproj.database import query_utm_crs_info
 
 from urpt_gcs.errors import DemError
+from urpt_gcs.inputs import require_regular_file
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -138,10 +139,7 @@ def _horizontal(crs: pyproj.CRS) -> pyproj.CRS:
 def open_dem(path: Path) -> DemInfo:
     """Check that ``path`` is a usable elevation raster and describe it without reading pixels."""
     name = str(path)
-    if not path.exists():
-        raise DemError(f"DEM '{name}' does not exist: check the path given to --dem")
-    if path.is_dir():
-        raise DemError(f"DEM '{name}' is a folder: give the GeoTIFF file inside it to --dem")
+    require_regular_file(path, "DEM", "--dem", DemError)
     try:
         with rasterio.open(path) as src:
             if src.crs is None:
