@@ -17,7 +17,8 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.errors import DemError, PlanError, SettingsError, TargetsError
-from urpt_gcs.gtsp import Instance, build_instance
+from urpt_gcs.gtsp import Instance, build_instance, instance_bytes
+from urpt_gcs.inputs import require_memory
 from urpt_gcs.mission import GeoPoint, Mission, MissionSettings, build_mission
 from urpt_gcs.safety import (
     FlightModel,
@@ -214,6 +215,32 @@ def _check_ground(
     )
 
 
+def _require_window(
+    info: DemInfo,
+    cell_m: float,
+    need: tuple[float, float, float, float],
+    altitude_m: float,
+    settings: PlanSettings,
+) -> None:
+    """Refuse a camera cone whose DEM window would not fit the memory budget.
+
+    The window is counted in full even where it runs past the DEM: every ray of the
+    visibility sweep and every line of sight is sampled that far, cell by cell.
+    """
+    width = math.ceil((need[2] - need[0]) / cell_m)
+    height = math.ceil((need[3] - need[1]) / cell_m)
+    # The cells as read, as float64 elevations, and the nodata mask.
+    per_cell = np.dtype(info.dtype).itemsize + 8 + 1
+    flag = "--altitude" if settings.altitude_m is not None else "--clearance"
+    value = settings.altitude_m if settings.altitude_m is not None else settings.clearance_m
+    require_memory(
+        float(width) * float(height) * per_cell,
+        f"{flag} {value:g} m with --fov {settings.fov_deg:g} puts the camera at "
+        f"{altitude_m:g} m; its cone needs a DEM window of {width} x {height} cells, which",
+        "lower --altitude/--clearance or narrow the camera (--fov)",
+    )
+
+
 def plan(
     dem_path: Path,
     targets_path: Path,
@@ -252,6 +279,14 @@ def plan(
 
     say("reading targets")
     targets = read_targets(targets_path)
+    # Every target is a viewpoint (its nadir), so this refuses, before any work, a target
+    # count whose distance matrix could not fit even without the boundary viewpoints.
+    m = len(targets.targets)
+    require_memory(
+        instance_bytes(m, m),
+        f"{m} targets in {targets.source!r}: the distance matrix of their nadir points alone",
+        "plan fewer targets at a time (split the file)",
+    )
     info = open_dem(dem_path)
     home_lat, home_lon, home_source = _pick_home(targets, settings)
     names = [t.name for t in targets.targets]
@@ -289,6 +324,7 @@ def plan(
         need = _bbox(points_xy, reach + margin)
         if _contains(area, need):
             break
+        _require_window(info, terrain.cell_m, need, altitude, settings)
         area = need
         terrain = read_terrain(info, crs, area)
     lap("terrain")
