@@ -6,7 +6,10 @@ import os
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
+import rasterio
+from rasterio.transform import from_origin
 
 from urpt_gcs.errors import TargetsError
 from urpt_gcs.inputs import (
@@ -17,6 +20,7 @@ from urpt_gcs.inputs import (
     require_memory,
     require_regular_file,
 )
+from urpt_gcs.terrain import open_dem, read_terrain
 
 
 def _read(path: Path, cap: int = 1024) -> bytes:
@@ -105,3 +109,19 @@ def test_memory_budget_setting(monkeypatch: pytest.MonkeyPatch) -> None:
         memory_budget_bytes()
     monkeypatch.delenv(MEMORY_BUDGET_ENV)
     assert 0 < memory_budget_bytes() <= 4 * 2**30
+
+
+def test_a_dem_window_over_the_budget_is_refused_before_reading(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    path = tmp_path / "dem.tif"
+    profile = {"driver": "GTiff", "height": 400, "width": 400, "count": 1, "dtype": "float32"}
+    transform = from_origin(500_000.0, 5_200_000.0, 1.0, 1.0)
+    with rasterio.open(path, "w", crs="EPSG:32632", transform=transform, **profile) as dst:
+        dst.write(np.full((400, 400), 100.0, dtype=np.float32), 1)
+    info = open_dem(path)
+    area = (500_000.0, 5_199_600.0, 500_400.0, 5_200_000.0)
+    assert read_terrain(info, info.horizontal_crs, area).elevation_m.shape == (400, 400)
+    monkeypatch.setenv(MEMORY_BUDGET_ENV, "0.001")
+    with pytest.raises(MemoryBudgetError, match=r"DEM '.*dem.tif': the window of 400 x 400"):
+        read_terrain(info, info.horizontal_crs, area)

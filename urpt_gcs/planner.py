@@ -231,12 +231,14 @@ def _require_window(
     height = math.ceil((need[3] - need[1]) / cell_m)
     # The cells as read, as float64 elevations, and the nodata mask.
     per_cell = np.dtype(info.dtype).itemsize + 8 + 1
-    flag = "--altitude" if settings.altitude_m is not None else "--clearance"
-    value = settings.altitude_m if settings.altitude_m is not None else settings.clearance_m
+    if settings.altitude_m is not None:
+        cause = f"--altitude {altitude_m:g} m"
+    else:
+        cause = f"--clearance {settings.clearance_m:g} m (camera at {altitude_m:.0f} m)"
     require_memory(
         float(width) * float(height) * per_cell,
-        f"{flag} {value:g} m with --fov {settings.fov_deg:g} puts the camera at "
-        f"{altitude_m:g} m; its cone needs a DEM window of {width} x {height} cells, which",
+        f"{cause} with --fov {settings.fov_deg:g}: the camera cone needs a DEM window of "
+        f"{width} x {height} cells, which",
         "lower --altitude/--clearance or narrow the camera (--fov)",
     )
 
