@@ -22,5 +22,5 @@ def test_instance_memory_is_refused_naming_viewpoints_and_fix(
 ) -> None:
     monkeypatch.setenv(MEMORY_BUDGET_ENV, "1")
     require_instance_memory(10_000, 300)
-    with pytest.raises(MemoryBudgetError, match=r"20000 viewpoints .* 3\.0 GiB, .* --samples"):
+    with pytest.raises(MemoryBudgetError, match=r"20000 viewpoints .* 3\.00 GiB, .* --samples"):
         require_instance_memory(20_000, 300)

@@ -101,7 +101,7 @@ def test_a_folder_is_refused(tmp_path: Path) -> None:
 def test_memory_budget_setting(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(MEMORY_BUDGET_ENV, "0.5")
     assert memory_budget_bytes() == 2**29
-    with pytest.raises(MemoryBudgetError, match=r"a table would need 1\.0 GiB, over .* 0\.5 GiB"):
+    with pytest.raises(MemoryBudgetError, match=r"a table would need 1\.00 GiB, over .* 0\.50 GiB"):
         require_memory(2**30, "a table", "use a smaller one")
     require_memory(2**28, "a table", "use a smaller one")
     monkeypatch.setenv(MEMORY_BUDGET_ENV, "lots")

@@ -173,6 +173,8 @@ def _size(nbytes: float) -> str:
 
 def _gib(nbytes: float) -> str:
     gib = nbytes / 2**30
+    if gib < 10.0:  # enough digits that an estimate just over the budget reads as over it
+        return f"{gib:.2f} GiB"
     return f"{gib:.1f} GiB" if gib < 1e6 else f"{gib:.1e} GiB"
 
 
