@@ -159,12 +159,22 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--targets", str(BAD / "demo_300_targets.csv")],
         ["300 targets", "GiB", "fewer targets per plan"],
     ),
+    "targets_100000": (
+        ["--targets", "%targets_100000.csv"],
+        ["100000 targets in", "targets_100000.csv", "GiB", "plan fewer targets at a time"],
+    ),
 }
 
 
 def _sparse(path: Path, size: int) -> None:
     with path.open("wb") as fh:
         fh.truncate(size)
+
+
+def _many_targets(path: Path) -> None:
+    grid = ((47.0 + 1e-5 * (i // 1000), 8.0 + 1e-5 * (i % 1000)) for i in range(100_000))
+    rows = (f"P{i},{lat:.5f},{lon:.5f}\n" for i, (lat, lon) in enumerate(grid))
+    path.write_text("name,lat,lon\n" + "".join(rows))
 
 
 # Samples made at run time, by the name an argument "%name" gives.
@@ -174,6 +184,7 @@ RUNTIME: dict[str, Callable[[Path], None]] = {
     "targets_link_to_dev_zero.kml": lambda p: p.symlink_to("/dev/zero"),
     "upload_link_to_dev_urandom.plan": lambda p: p.symlink_to("/dev/urandom"),
     "targets_too_large.kml": lambda p: _sparse(p, TARGETS_MAX_BYTES + 2**20),
+    "targets_100000.csv": _many_targets,
 }
 # What a child process running a case may spend.
 _CHILD_TIMEOUT_S = 120.0
