@@ -4,12 +4,21 @@ Each case: exit status 1, exactly one line on stderr naming the input and what t
 traceback, and nothing written: run once with no --out yet (it is not created) and once with
 an --out holding an earlier plan's outputs (they are left byte for byte, and nothing else
 appears beside them). ``{tmp}`` in a case's arguments is that run's own folder.
+
+Samples that cannot be committed (FIFOs, links to devices, a file over a size cap) are made at
+run time in a folder of their own: an argument ``%name`` stands for the path ``RUNTIME[name]``
+makes. Those cases run the CLI in a child process with a time and memory limit, so that a
+regression fails instead of hanging or eating the machine.
 """
 
 from __future__ import annotations
 
 import os
+import resource
 import shutil
+import subprocess
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -17,6 +26,7 @@ from click.testing import CliRunner
 from conftest import DEMO
 
 from urpt_gcs.cli import main
+from urpt_gcs.inputs import TARGETS_MAX_BYTES
 
 BAD = Path(__file__).resolve().parent / "data" / "bad"
 SITE = str(DEMO / "site.tif")
@@ -190,7 +200,65 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--export-gtsp", "{tmp}/out/summary.json"],
         ["--export-gtsp", "summary.json", "the plan's own outputs"],
     ),
+    "targets_fifo": (
+        ["--targets", "%targets_fifo.kml"],
+        ["targets_fifo.kml", "FIFO", "not a regular file", "--targets"],
+    ),
+    "dem_fifo": (["--dem", "%dem_fifo.tif"], ["dem_fifo.tif", "FIFO", "--dem"]),
+    "targets_link_to_dev_zero": (
+        ["--targets", "%targets_link_to_dev_zero.kml"],
+        ["targets_link_to_dev_zero.kml", "a link to '/dev/zero', a character device"],
+    ),
+    "altitude_1e9": (
+        ["--altitude", "1e9"],
+        ["--altitude", "DEM window", "GiB", "lower --altitude/--clearance or narrow the camera"],
+    ),
+    "clearance_1e6": (
+        ["--clearance", "1e6"],
+        ["--clearance", "DEM window", "GiB", "lower --altitude/--clearance or narrow the camera"],
+    ),
+    "targets_too_large": (
+        ["--targets", "%targets_too_large.kml"],
+        ["targets_too_large.kml", "is 65.0 MiB, over the 64.0 MiB limit", "split"],
+    ),
+    "dem_name_too_long": (
+        ["--dem", str(BAD / ("d" * 300 + ".tif"))],
+        ["DEM", "a name of 304 characters", "too long", "--dem"],
+    ),
+    "demo_300_targets": (
+        ["--targets", str(BAD / "demo_300_targets.csv")],
+        ["300 targets", "GiB", "fewer targets per plan"],
+    ),
+    "targets_100000": (
+        ["--targets", "%targets_100000.csv"],
+        ["100000 targets in", "targets_100000.csv", "GiB", "plan fewer targets at a time"],
+    ),
 }
+
+
+def _sparse(path: Path, size: int) -> None:
+    with path.open("wb") as fh:
+        fh.truncate(size)
+
+
+def _many_targets(path: Path) -> None:
+    grid = ((47.0 + 1e-5 * (i // 1000), 8.0 + 1e-5 * (i % 1000)) for i in range(100_000))
+    rows = (f"P{i},{lat:.5f},{lon:.5f}\n" for i, (lat, lon) in enumerate(grid))
+    path.write_text("name,lat,lon\n" + "".join(rows))
+
+
+# Samples made at run time, by the name an argument "%name" gives.
+RUNTIME: dict[str, Callable[[Path], None]] = {
+    "targets_fifo.kml": os.mkfifo,
+    "dem_fifo.tif": os.mkfifo,
+    "targets_link_to_dev_zero.kml": lambda p: p.symlink_to("/dev/zero"),
+    "upload_link_to_dev_urandom.plan": lambda p: p.symlink_to("/dev/urandom"),
+    "targets_too_large.kml": lambda p: _sparse(p, TARGETS_MAX_BYTES + 2**20),
+    "targets_100000.csv": _many_targets,
+}
+# What a child process running a case may spend.
+_CHILD_TIMEOUT_S = 120.0
+_CHILD_MEMORY_BYTES = 8 * 2**30
 
 
 def _expand(args: list[str], tmp: Path) -> list[str]:
@@ -198,16 +266,40 @@ def _expand(args: list[str], tmp: Path) -> list[str]:
     for arg in args:
         if arg.startswith("@"):
             out += (BAD / arg[1:]).read_text().split()
+        elif arg.startswith("%"):
+            made = tmp / "runtime" / arg[1:]
+            made.parent.mkdir(exist_ok=True)
+            RUNTIME[arg[1:]](made)
+            out.append(str(made))
         else:
             out.append(arg.replace("{tmp}", str(tmp)))
     return out
 
 
-def run_case(args: list[str], out: Path) -> tuple[int, str]:
-    """Run `urpt-gcs plan` with the demo site's inputs overridden by ``args``.
+def _limit_child() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (_CHILD_MEMORY_BYTES, _CHILD_MEMORY_BYTES))
 
-    ``{tmp}`` in ``args`` stands for the folder ``out`` is in.
-    """
+
+def run_cli(args: list[str], in_child: bool) -> tuple[int, str]:
+    """Exit status and stderr of ``urpt-gcs ARGS``, in process or in a limited child."""
+    if not in_child:
+        result = CliRunner().invoke(main, args)
+        return result.exit_code, result.stderr
+    try:
+        child = subprocess.run(
+            [sys.executable, "-c", "from urpt_gcs.cli import main; main()", *args],
+            capture_output=True,
+            text=True,
+            timeout=_CHILD_TIMEOUT_S,
+            preexec_fn=_limit_child,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"urpt-gcs {' '.join(args)} still ran after {_CHILD_TIMEOUT_S:g} s")
+    return child.returncode, child.stderr
+
+
+def run_case(args: list[str], out: Path, in_child: bool = False) -> tuple[int, str]:
+    """Run `urpt-gcs plan` with the demo site's inputs overridden by ``args`` (expanded)."""
     full = [
         "plan",
         "--dem",
@@ -219,20 +311,22 @@ def run_case(args: list[str], out: Path) -> tuple[int, str]:
         "--time-limit",
         "0.5",
         "--no-map",
-        *_expand(args, out.parent),
+        *args,
     ]
-    result = CliRunner().invoke(main, full)
-    return result.exit_code, result.stderr
+    return run_cli(full, in_child)
 
 
 Snapshot = dict[str, tuple[bytes, int] | str]
 
 
 def snapshot(root: Path) -> Snapshot:
-    """Every entry under ``root``: a file's bytes and mtime, a link's target, or ``<dir>``."""
+    """Every entry under ``root``: a file's bytes and mtime, a link's target, or ``<dir>``
+    (the samples made at run time, under ``runtime/``, left out)."""
     found: Snapshot = {}
     for path in sorted(root.rglob("*")):
         key = str(path.relative_to(root))
+        if key == "runtime" or key.startswith("runtime/"):
+            continue
         if path.is_symlink():
             found[key] = f"-> {os.readlink(path)}"
         elif path.is_dir():
@@ -263,9 +357,10 @@ def test_bad_input(case: str, prior: str, tmp_path: Path, request: pytest.Fixtur
     out = tmp_path / "out"
     if prior == "previous_out":
         shutil.copytree(request.getfixturevalue("previous_out"), out, symlinks=True)
+    expanded = _expand(args, tmp_path)
     files_before = snapshot(tmp_path)
     before = sorted(p.name for p in BAD.iterdir())
-    code, stderr = run_case(args, out)
+    code, stderr = run_case(expanded, out, in_child=any(a.startswith("%") for a in args))
     assert code == 1, stderr
     lines = stderr.strip().splitlines()
     assert len(lines) == 1, stderr
@@ -287,19 +382,24 @@ UPLOAD_CASES: dict[str, tuple[str, list[str]]] = {
         "upload_unsupported_item.plan",
         ["upload_unsupported_item.plan", "ComplexItem", "flatten it"],
     ),
+    "upload_link_to_dev_urandom": (
+        "%upload_link_to_dev_urandom.plan",
+        ["upload_link_to_dev_urandom.plan", "a link to '/dev/urandom', a character device"],
+    ),
 }
 
 
 @pytest.mark.parametrize("case", sorted(UPLOAD_CASES))
-def test_bad_upload_file(case: str) -> None:
+def test_bad_upload_file(case: str, tmp_path: Path) -> None:
     name, words = UPLOAD_CASES[case]
-    result = CliRunner().invoke(
-        main, ["upload", str(BAD / name), "--connect", "udpin://127.0.0.1:14999"]
+    path = _expand([name], tmp_path)[0] if name.startswith("%") else str(BAD / name)
+    code, stderr = run_cli(
+        ["upload", path, "--connect", "udpin://127.0.0.1:14999"], in_child=name.startswith("%")
     )
-    assert result.exit_code == 1, result.output
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("urpt-gcs: error: "), result.stderr
-    assert "Traceback" not in result.stderr
+    assert code == 1, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("urpt-gcs: error: "), stderr
+    assert "Traceback" not in stderr
     for word in words:
         assert word in lines[0], lines[0]
 

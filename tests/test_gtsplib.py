@@ -211,8 +211,11 @@ def test_malformed_file_fails_on_one_line_naming_file_and_line(tmp_path: Path, c
 
 
 def test_unreadable_files(tmp_path: Path) -> None:
-    with pytest.raises(SettingsError, match=r"cannot be read as text \(No such file"):
+    with pytest.raises(SettingsError, match=r"'.*absent.gtsp' does not exist"):
         read_gtsplib(tmp_path / "absent.gtsp")
+    (tmp_path / "zero.gtsp").symlink_to("/dev/zero")
+    with pytest.raises(SettingsError, match=r"a character device, not a regular file"):
+        read_gtsplib(tmp_path / "zero.gtsp")
     (tmp_path / "bin.gtsp").write_bytes(b"\xff\xfe\x00NAME")
     with pytest.raises(SettingsError, match=r"cannot be read as text \(not UTF-8\)"):
         read_gtsplib(tmp_path / "bin.gtsp")

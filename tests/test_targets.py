@@ -331,3 +331,27 @@ def test_fuzz_returns_targets_or_raises_targets_error(
     else:
         assert result.targets
         assert result.source == str(path)
+
+
+# --- many targets ----------------------------------------------------------------------------
+
+
+def _csv(path: Path, rows: list[tuple[str, float, float]]) -> Path:
+    path.write_text("name,lat,lon\n" + "".join(f"{n},{a!r},{o!r}\n" for n, a, o in rows))
+    return path
+
+
+def test_duplicates_among_many_targets_are_found_across_grid_cells(tmp_path: Path) -> None:
+    # A regular grid 1e-5 degrees apart, then one point 0.9e-7 from a grid point on both axes
+    # (on the other side of a hash-cell boundary) and, later, an exact copy of another.
+    rows = [(f"P{i}", 47.0 + 1e-5 * (i // 100), 8.0 + 1e-5 * (i % 100)) for i in range(5000)]
+    assert len(read_targets(_csv(tmp_path / "grid.csv", rows)).targets) == 5000
+    near = ("Near P1234", rows[1234][1] - 0.9e-7, rows[1234][2] + 0.9e-7)
+    copy = ("Copy P17", rows[17][1], rows[17][2])
+    path = _csv(tmp_path / "dup.csv", [*rows, near, copy])
+    _assert_error(path, "point 'P1234' (row 1236) and point 'Near P1234' (row 5002) at the same")
+
+
+def test_points_just_over_the_tolerance_apart_are_distinct(tmp_path: Path) -> None:
+    rows = [("A", 47.0, 8.0), ("B", 47.0 + 1.5e-7, 8.0), ("C", 47.0, 8.0 - 1.5e-7)]
+    assert len(read_targets(_csv(tmp_path / "close.csv", rows)).targets) == 3

@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 import shapely
 
+from urpt_gcs.inputs import require_memory
 from urpt_gcs.terrain import FloatArray, Terrain
 from urpt_gcs.visibility import BoolArray, Camera, Region, line_of_sight
 
@@ -24,6 +25,8 @@ IntArray = npt.NDArray[np.int64]
 
 # How far boundary samples are pulled towards their target, in DEM cells, on each try.
 _INSETS_CELLS = (1.0, 2.0, 4.0)
+# Elements per block of rows of a distance matrix under construction.
+_BLOCK_ELEMENTS = 1 << 20
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,10 +122,43 @@ class Instance:
 
 
 def euclidean_matrix(points_xy: FloatArray) -> FloatArray:
-    """Pairwise Euclidean distances."""
-    diff = points_xy[:, None, :] - points_xy[None, :, :]
-    dist: FloatArray = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+    """Pairwise Euclidean distances, an (n, n) float64 matrix.
+
+    Built a block of rows at a time, so that beside the result only a few blocks of
+    ``_BLOCK_ELEMENTS`` are ever allocated (no (n, n, 2) temporary).
+    """
+    pts = np.asarray(points_xy, dtype=np.float64)
+    n = len(pts)
+    dist: FloatArray = np.empty((n, n), dtype=np.float64)
+    rows = max(_BLOCK_ELEMENTS // max(n, 1), 1)
+    for lo in range(0, n, rows):
+        dx = pts[lo : lo + rows, None, 0] - pts[None, :, 0]
+        dy = pts[lo : lo + rows, None, 1] - pts[None, :, 1]
+        np.sqrt(dx * dx + dy * dy, out=dist[lo : lo + rows])
     return dist
+
+
+def instance_bytes(n_viewpoints: int, n_targets: int) -> float:
+    """Memory of a planning instance's dense arrays: the distance matrix
+    (``n_viewpoints**2 * 8`` bytes, and the blocks it is built from) and the cover sets."""
+    n = float(n_viewpoints)
+    return n * n * 8.0 + n * n_targets + 2.0 * 8.0 * _BLOCK_ELEMENTS
+
+
+def require_instance_memory(n_viewpoints: int, n_targets: int) -> None:
+    """Refuse a planning instance whose dense arrays would not fit the memory budget.
+
+    Raises
+    ------
+    MemoryBudgetError
+        Naming the estimate and what to change (both sizes scale with ``--samples`` and the
+        number of targets).
+    """
+    require_memory(
+        instance_bytes(n_viewpoints, n_targets),
+        f"the distance matrix of {n_viewpoints} viewpoints ({n_targets} targets)",
+        "use fewer --samples, or fewer targets per plan",
+    )
 
 
 def cover_sets(
@@ -186,6 +222,7 @@ def build_instance(
         pending[idx[ok]] = False
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
+    require_instance_memory(len(viewpoints), len(nadir))
     covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera)
     depot_distance = None
     if depot_xy is not None:

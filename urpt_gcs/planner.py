@@ -17,7 +17,8 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
-from urpt_gcs.gtsp import Instance, build_instance, cover_sets
+from urpt_gcs.gtsp import Instance, build_instance, cover_sets, instance_bytes
+from urpt_gcs.inputs import require_memory
 from urpt_gcs.mission import (
     GeoPoint,
     Mission,
@@ -222,6 +223,34 @@ def _check_ground(
     )
 
 
+def _require_window(
+    info: DemInfo,
+    cell_m: float,
+    need: tuple[float, float, float, float],
+    altitude_m: float,
+    settings: PlanSettings,
+) -> None:
+    """Refuse a camera cone whose DEM window would not fit the memory budget.
+
+    The window is counted in full even where it runs past the DEM: every ray of the
+    visibility sweep and every line of sight is sampled that far, cell by cell.
+    """
+    width = math.ceil((need[2] - need[0]) / cell_m)
+    height = math.ceil((need[3] - need[1]) / cell_m)
+    # The cells as read, as float64 elevations, and the nodata mask.
+    per_cell = np.dtype(info.dtype).itemsize + 8 + 1
+    if settings.altitude_m is not None:
+        cause = f"--altitude {altitude_m:g} m"
+    else:
+        cause = f"--clearance {settings.clearance_m:g} m (camera at {altitude_m:.0f} m)"
+    require_memory(
+        float(width) * float(height) * per_cell,
+        f"{cause} with --fov {settings.fov_deg:g}: the camera cone needs a DEM window of "
+        f"{width} x {height} cells, which",
+        "lower --altitude/--clearance or narrow the camera (--fov)",
+    )
+
+
 def plan(
     dem_path: Path,
     targets_path: Path,
@@ -260,6 +289,14 @@ def plan(
 
     say("reading targets")
     targets = read_targets(targets_path)
+    # Every target is a viewpoint (its nadir), so this refuses, before any work, a target
+    # count whose distance matrix could not fit even without the boundary viewpoints.
+    m = len(targets.targets)
+    require_memory(
+        instance_bytes(m, m),
+        f"{m} targets in {targets.source!r}: the distance matrix of their nadir points alone",
+        "plan fewer targets at a time (split the file)",
+    )
     info = open_dem(dem_path, settings.band)
     home_lat, home_lon, home_source = _pick_home(targets, settings)
     names = [t.name for t in targets.targets]
@@ -297,6 +334,7 @@ def plan(
         need = _bbox(points_xy, reach + margin)
         if _contains(area, need):
             break
+        _require_window(info, terrain.cell_m, need, altitude, settings)
         area = need
         terrain = read_terrain(info, crs, area)
     # Heights from the window planned on: a geographic DEM's fitted georeferencing differs

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import itertools
 import json
 import math
 import re
@@ -24,6 +25,7 @@ import defusedxml.ElementTree as safe_et
 from defusedxml import DefusedXmlException
 
 from urpt_gcs.errors import TargetsError
+from urpt_gcs.inputs import TARGETS_MAX_BYTES, read_capped
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,15 +121,15 @@ def _kml_points(source: str, data: bytes) -> list[_Point]:
     except LookupError as exc:
         raise _error(source, f"has an unknown encoding ({_q(str(exc))})", _KML_FIX) from exc
     points: list[_Point] = []
-    placemarks = (e for e in root.iter() if _local(e.tag) == "Placemark")
+    # "{*}" matches any namespace or none, so every KML version reads alike.
+    itself = [root] if _local(root.tag) == "Placemark" else []
+    placemarks = itertools.chain(itself, root.iterfind(".//{*}Placemark"))
     for number, placemark in enumerate(placemarks, start=1):
-        name_element = next((e for e in placemark if _local(e.tag) == "name"), None)
+        name_element = placemark.find("{*}name")
         name = None if name_element is None else "".join(name_element.itertext())
         where = f"placemark {number}"
-        shown = f"{where} {_q(name.strip())}" if name and name.strip() else where
         # Points directly or in (nested) MultiGeometry; placemarks do not nest in valid KML.
-        elements = [e for e in placemark.iter() if _local(e.tag) == "Point"]
-        lon_lats = [_kml_lon_lat(source, shown, e) for e in elements]
+        lon_lats = [_kml_lon_lat(source, where, name, e) for e in placemark.iterfind(".//{*}Point")]
         if lon_lats:
             points.extend(_points(name, where, lon_lats))
     if not points:
@@ -136,8 +138,8 @@ def _kml_points(source: str, data: bytes) -> list[_Point]:
     return points
 
 
-def _kml_lon_lat(source: str, where: str, point: Element) -> tuple[float, float]:
-    element = next((e for e in point if _local(e.tag) == "coordinates"), None)
+def _kml_lon_lat(source: str, where: str, name: str | None, point: Element) -> tuple[float, float]:
+    element = point.find("{*}coordinates")
     text = "" if element is None else "".join(element.itertext())
     # Tuples are whitespace-separated; tolerate blanks around the commas inside one.
     tuples = re.sub(r"\s*,\s*", ",", text.strip()).split()
@@ -145,7 +147,8 @@ def _kml_lon_lat(source: str, where: str, point: Element) -> tuple[float, float]
     if len(fields) in (2, 3):
         with contextlib.suppress(ValueError):
             return float(fields[0]), float(fields[1])
-    problem = f"has a Point in {where} with <coordinates> {_q(text.strip())}"
+    shown = f"{where} {_q(name.strip())}" if name and name.strip() else where
+    problem = f"has a Point in {shown} with <coordinates> {_q(text.strip())}"
     raise _error(source, problem, "give one 'lon,lat' or 'lon,lat,alt' tuple of numbers")
 
 
@@ -319,24 +322,46 @@ def _check(source: str, points: list[_Point]) -> TargetSet:
         problem = f"names two homes, {homes[0].label()} and {homes[1].label()}"
         raise _error(source, problem, "keep one point named Home or Launch")
     targets: list[Target] = []
-    labels: list[str] = []
+    wheres: list[str] = []
     for p in points:
         if not p.is_home:
             targets.append(Target(p.name or f"T{len(targets) + 1}", p.lat_deg, p.lon_deg))
-            labels.append(f"point {_q(targets[-1].name)} ({p.where})")
+            wheres.append(p.where)
     if not targets:
         raise _error(source, "has no targets besides the home point", "add the points to visit")
-    order = sorted(range(len(targets)), key=lambda i: targets[i].lat_deg)
-    for k, i in enumerate(order):
-        for j in order[k + 1 :]:
-            if targets[j].lat_deg - targets[i].lat_deg > SAME_PLACE_DEG:
-                break
-            if abs(targets[j].lon_deg - targets[i].lon_deg) <= SAME_PLACE_DEG:
-                first, second = sorted((i, j))
-                problem = f"has {labels[first]} and {labels[second]} at the same place"
-                raise _error(source, problem, "remove one of them")
+    duplicate = _first_duplicate(targets)
+    if duplicate is not None:
+        labels = [f"point {_q(targets[i].name)} ({wheres[i]})" for i in duplicate]
+        problem = f"has {labels[0]} and {labels[1]} at the same place"
+        raise _error(source, problem, "remove one of them")
     home = Target(homes[0].name or "Home", homes[0].lat_deg, homes[0].lon_deg) if homes else None
     return TargetSet(targets=tuple(targets), home=home, source=source)
+
+
+def _first_duplicate(targets: list[Target]) -> tuple[int, int] | None:
+    """The first target (in file order) at the same place as an earlier one, with that one.
+
+    Targets are hashed on a grid of ``SAME_PLACE_DEG`` cells: two points within that distance
+    on both axes sit in the same or adjacent cells, so each point is compared with the few
+    points of its 3 x 3 block, not with every other point.
+    """
+    grid: dict[tuple[int, int], list[int]] = {}
+    for j, t in enumerate(targets):
+        row, col = math.floor(t.lat_deg / SAME_PLACE_DEG), math.floor(t.lon_deg / SAME_PLACE_DEG)
+        near = (
+            i
+            for d_row in (-1, 0, 1)
+            for d_col in (-1, 0, 1)
+            for i in grid.get((row + d_row, col + d_col), ())
+        )
+        for i in sorted(near):
+            if (
+                abs(targets[i].lat_deg - t.lat_deg) <= SAME_PLACE_DEG
+                and abs(targets[i].lon_deg - t.lon_deg) <= SAME_PLACE_DEG
+            ):
+                return i, j
+        grid.setdefault((row, col), []).append(j)
+    return None
 
 
 def read_targets(path: Path) -> TargetSet:
@@ -359,9 +384,9 @@ def read_targets(path: Path) -> TargetSet:
     Raises
     ------
     TargetsError
-        If the file is missing, unreadable, empty, of an unknown kind, malformed or declares
-        XML entities; if it has no targets, a point off the globe, two homes or two targets
-        within 1e-7 degrees of each other.
+        If the file is missing, not a regular file, over 64 MiB, unreadable, empty, of an
+        unknown kind, malformed or declares XML entities; if it has no targets, a point off
+        the globe, two homes or two targets within 1e-7 degrees of each other.
     """
     source = str(path)
     reader = _READERS.get(path.suffix.lower())
@@ -369,13 +394,14 @@ def read_targets(path: Path) -> TargetSet:
         kinds = ", ".join(_READERS)
         problem = f"has an unknown extension {_q(path.suffix or '(none)')}"
         raise _error(source, problem, f"use one of {kinds}")
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        problem = {FileNotFoundError: "does not exist", IsADirectoryError: "is a folder"}.get(
-            type(exc), f"cannot be read ({_q(exc.strerror or type(exc).__name__)})"
-        )
-        raise _error(source, problem, "check the path and the file's permissions") from exc
+    data = read_capped(
+        path,
+        "targets file",
+        "--targets",
+        TargetsError,
+        TARGETS_MAX_BYTES,
+        "split the targets into several files and plan them one by one",
+    )
     if not data.strip():
         raise _error(source, "is empty", "export the targets again")
     return _check(source, reader(source, data))

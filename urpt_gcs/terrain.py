@@ -35,6 +35,7 @@ from pyproj.aoi import AreaOfInterest
 from pyproj.database import query_utm_crs_info
 
 from urpt_gcs.errors import DemError
+from urpt_gcs.inputs import require_memory, require_regular_file
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -237,10 +238,7 @@ def open_dem(path: Path, band: int | None = None) -> DemInfo:
         bands and none named, a complex band, or heights in a unit that is not a length.
     """
     name = str(path)
-    if not path.exists():
-        raise DemError(f"DEM '{name}' does not exist: check the path given to --dem")
-    if path.is_dir():
-        raise DemError(f"DEM '{name}' is a folder: give the GeoTIFF file inside it to --dem")
+    require_regular_file(path, "DEM", "--dem", DemError)
     try:
         with rasterio.open(path) as src:
             if src.crs is None:
@@ -432,6 +430,14 @@ def _read_window(
             f"DEM '{info.path}' does not cover the targets' area: check that the targets "
             "belong to this site"
         )
+    # The cells as read, as float64 elevations, and the nodata mask.
+    per_cell = np.dtype(info.dtype).itemsize + 8 + 1
+    require_memory(
+        float(window.width) * float(window.height) * per_cell,
+        f"DEM '{info.path}': the window of {int(window.width)} x {int(window.height)} cells "
+        "around the targets",
+        "plan targets that lie closer together, or lower --altitude/--clearance",
+    )
     with rasterio.open(info.path) as src:
         band = src.read(info.band, window=window, masked=True)
     return window, _clean(np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m)

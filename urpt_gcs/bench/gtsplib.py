@@ -22,8 +22,9 @@ import numpy as np
 
 from urpt_gcs.bench import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.formats.gtsplib import read_gtsplib
+from urpt_gcs.formats.gtsplib import BENCH_FLAG, read_gtsplib
 from urpt_gcs.gtsp import Instance
+from urpt_gcs.inputs import GTSPLIB_MAX_BYTES, read_capped
 from urpt_gcs.output import write_all
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 
@@ -109,9 +110,12 @@ def _number(path: Path, line: int, column: str, text: str | None) -> float | Non
 
 
 def _read_table(path: Path, columns: tuple[str, ...]) -> dict[str, dict[str, float | None]]:
+    data = read_capped(
+        path, "table", BENCH_FLAG, SettingsError, GTSPLIB_MAX_BYTES, "give the published CSV"
+    )
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise SettingsError(f"'{path}' cannot be read: {exc}") from exc
     reader = csv.DictReader(io.StringIO(text))
     absent = [c for c in ("instance", *columns) if c not in (reader.fieldnames or [])]

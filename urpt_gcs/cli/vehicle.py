@@ -40,7 +40,7 @@ def upload_command(mission_file: Path, connect: str, retries: int, timeout: floa
     from urpt_gcs.sitl.replay import read_mission
 
     try:
-        mission = read_mission(mission_file)
+        mission = read_mission(mission_file, flag="urpt-gcs upload")
     except UrptError as exc:
         fail(exc)
         return

@@ -30,11 +30,15 @@ import numpy as np
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.inputs import GTSPLIB_MAX_BYTES, read_capped
 from urpt_gcs.output import check_file, commit
 from urpt_gcs.terrain import FloatArray
 from urpt_gcs.visibility import BoolArray
 
 __all__ = ["export_gtsplib", "read_gtsplib", "read_tour", "write_gtsplib"]
+
+# Where GTSPLIB files come from, for the messages about them.
+BENCH_FLAG = "urpt-gcs bench gtsplib"
 
 _COORDINATE_TYPES = ("EUC_2D", "CEIL_2D", "ATT", "GEO")
 _WEIGHT_TYPES = (*_COORDINATE_TYPES, "EXPLICIT")
@@ -118,11 +122,13 @@ class _File:
 
 
 def _split(path: Path) -> _File:
+    data = read_capped(
+        path, "GTSPLIB file", BENCH_FLAG, SettingsError, GTSPLIB_MAX_BYTES, "give a GTSPLIB file"
+    )
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8"
-        raise SettingsError(f"GTSPLIB file '{path}' cannot be read as text ({reason})") from exc
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SettingsError(f"GTSPLIB file '{path}' cannot be read as text (not UTF-8)") from exc
     parsed = _File(path)
     current: _Section | None = None
     for number, raw in enumerate(text.splitlines(), start=1):

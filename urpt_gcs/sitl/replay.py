@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.formats import read_plan, read_waypoints
+from urpt_gcs.inputs import MISSION_FILE_MAX_BYTES, read_capped
 from urpt_gcs.link import UploadReport, UploadSettings, upload_verified
 from urpt_gcs.mavsdk_link import MavsdkLink, connect
 from urpt_gcs.mission import Mission
@@ -129,13 +130,22 @@ class Flight:
     wall_time_s: float
 
 
-def read_mission(path: Path) -> Mission:
-    """A ``.plan`` or ``.waypoints`` file (by extension)."""
+def read_mission(path: Path, flag: str = "--plan") -> Mission:
+    """A ``.plan`` or ``.waypoints`` file (by extension), of at most 16 MiB.
+
+    ``flag`` is where the operator gave the path, for the messages.
+    """
+    data = read_capped(
+        path,
+        "mission file",
+        flag,
+        MissionFileError,
+        MISSION_FILE_MAX_BYTES,
+        "give the mission urpt-gcs plan wrote",
+    )
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MissionFileError(f"mission file '{path}' does not exist: check the path") from None
-    except (OSError, UnicodeDecodeError) as exc:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise MissionFileError(f"mission file '{path}' cannot be read: {exc}") from None
     if path.suffix.lower() == ".waypoints":
         return read_waypoints(text, str(path))

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from urpt_gcs.gtsp import Instance, IntArray
+from urpt_gcs.inputs import require_memory
 from urpt_gcs.terrain import FloatArray
 
 
@@ -42,6 +43,33 @@ class Clustered:
     def cycle_length(self, nodes: list[int] | IntArray) -> float:
         idx = np.asarray(nodes, dtype=np.int64)
         return float(self.distance[idx, np.roll(idx, -1)].sum())
+
+
+def partition_nodes(instance: Instance) -> int:
+    """How many nodes the partition form of ``instance`` has: one per (viewpoint, target it
+    sees) pair, and the depot."""
+    return int(np.count_nonzero(instance.covers)) + (1 if instance.has_depot else 0)
+
+
+def require_partition_memory(instance: Instance, solver: str, bytes_per_pair: float) -> None:
+    """Refuse, before building it, a partition form too big for the memory budget.
+
+    ``bytes_per_pair`` is what ``solver`` keeps, at its peak, per pair of nodes: 8 per dense
+    float64 node-by-node matrix, more for other copies.
+
+    Raises
+    ------
+    MemoryBudgetError
+        Naming the estimate and what to change.
+    """
+    n = partition_nodes(instance)
+    require_memory(
+        bytes_per_pair * float(n) * float(n),
+        f"the {solver} solver's distance matrices over {n} nodes (each of "
+        f"{instance.n_viewpoints} viewpoints once per target it sees, {instance.n_targets} "
+        "targets)",
+        "use fewer --samples, or fewer targets per plan",
+    )
 
 
 def cluster_instance(instance: Instance) -> Clustered:

@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.inputs import require_memory
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 
 # What `auto` lets the exact solver spend: state expansions and bytes of DP tables.
@@ -236,13 +237,18 @@ class ExactSolver:
 
     def solve(self, instance: Instance, settings: SolveSettings) -> Tour:
         started = time.perf_counter()
+        m, n = instance.n_targets, instance.n_viewpoints
         work = exact_work(instance)
-        if work.memory_bytes > MEMORY_BUDGET_BYTES * 4:
+        what = f"the exact solver's tables for {m} targets and {n} viewpoints"
+        fix = "use --solver heuristic or fewer --samples"
+        if m <= MAX_TARGETS and work.memory_bytes > MEMORY_BUDGET_BYTES * 4:
             raise SettingsError(
-                f"the exact solver would need {work.memory_bytes / 2**30:.1f} GiB for "
-                f"{instance.n_targets} targets and {instance.n_viewpoints} viewpoints: "
-                "use --solver heuristic or fewer --samples"
+                f"{what} would need {work.memory_bytes / 2**30:.1f} GiB, over the exact "
+                f"solver's {MEMORY_BUDGET_BYTES * 4 / 2**30:.1f} GiB: {fix}"
             )
+        if m <= MAX_TARGETS:
+            # Beside the DP tables: the distance copy, shortest paths and the bound tables.
+            require_memory(work.memory_bytes + 4.0 * 8.0 * float(n) * float(n), what, fix)
         found = solve_exact(instance)
         if found is None:
             raise SettingsError("internal check failed: the exact solver found no tour")

@@ -38,7 +38,12 @@ from urpt_gcs.gtsp import Instance
 from urpt_gcs.solvers import _lns_kernels as lns
 from urpt_gcs.solvers._ls_kernels import EPS, OR_OPT, SYMMETRIC, TWO_OPT
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
-from urpt_gcs.solvers.clustered import Clustered, cluster_instance, viewpoint_order
+from urpt_gcs.solvers.clustered import (
+    Clustered,
+    cluster_instance,
+    require_partition_memory,
+    viewpoint_order,
+)
 
 I32 = npt.NDArray[np.int32]
 F64 = npt.NDArray[np.float64]
@@ -47,6 +52,9 @@ F64 = npt.NDArray[np.float64]
 _CHUNK_S = 0.02
 # Crossings per compiled call, between two looks at the clock.
 _CHILDREN_PER_CALL = 25
+# Peak memory per pair of partition-form nodes: the partition form's matrix, its renumbered
+# copy and transpose, and the temporaries that rank the clusters (33 measured).
+_BYTES_PER_NODE_PAIR = 36.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -324,6 +332,7 @@ class HeuristicSolver:
         Tour
             A tour that sees every target, with the instance's geometric lower bound.
         """
+        require_partition_memory(instance, self.name, _BYTES_PER_NODE_PAIR)
         warm_up()
         started = time.perf_counter()
         clustered = cluster_instance(instance)

@@ -2,7 +2,8 @@
 
     .venv/bin/python tests/data/bad/make_samples.py
 
-Text samples are written by hand; these are binary, so they are made here.
+Text samples are written by hand; these are binary (or too long to write by hand), so they
+are made here.
 """
 
 from __future__ import annotations
@@ -13,10 +14,13 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import pyproj
 import rasterio
+from numpy.lib.stride_tricks import sliding_window_view
 from rasterio.transform import from_origin
 
 HERE = Path(__file__).resolve().parent
+DEMO_SITE = HERE.parents[2] / "missions" / "demo" / "site.tif"
 DEMO_ORIGIN = (531_500.0, 5_282_200.0)  # the demo site's north-west corner (EPSG:32632)
 
 
@@ -129,6 +133,24 @@ def main() -> None:
     with zipfile.ZipFile(buffer, "w") as kmz:
         kmz.writestr("images/readme.txt", "no KML in here\n")
     (HERE / "kmz_without_kml.kmz").write_bytes(buffer.getvalue())
+    _demo_targets("demo_300_targets.csv", 300)
+
+
+def _demo_targets(name: str, n: int) -> None:
+    """``n`` targets at random on the demo site, each amid valid cells (3 cells to nodata)."""
+    with rasterio.open(DEMO_SITE) as src:
+        valid = src.read_masks(1) > 0
+        transform, crs = src.transform, src.crs
+    inner = np.zeros_like(valid)
+    inner[3:-3, 3:-3] = sliding_window_view(valid, (7, 7)).all(axis=(2, 3))
+    rows, cols = np.nonzero(inner)
+    pick = np.random.default_rng(1).choice(len(rows), n, replace=False)
+    x, y = transform * (cols[pick] + 0.5, rows[pick] + 0.5)
+    to_wgs84 = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+    lon, lat = to_wgs84.transform(x, y)
+    points = enumerate(zip(lat, lon, strict=True), start=1)
+    lines = [f"T{i},{a:.9f},{o:.9f}\n" for i, (a, o) in points]
+    (HERE / name).write_text("name,lat,lon\n" + "".join(lines))
 
 
 if __name__ == "__main__":

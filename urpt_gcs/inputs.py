@@ -1,0 +1,233 @@
+"""Input files and memory: the checks every reader and every big allocation makes first.
+
+Every file urpt-gcs reads must be a regular file (a symlink is followed to one): a FIFO
+blocks the reader forever and a link to ``/dev/zero`` never ends, so both are refused from
+``os.stat`` before the file is opened. Text inputs are read through :func:`read_capped`,
+which reads at most one byte past the cap, so even a file that grows while it is read stays
+bounded.
+
+Arrays whose size follows from the inputs (DEM windows, dense distance matrices) are
+estimated first and refused by :func:`require_memory` when they would not fit the memory
+budget (see :func:`memory_budget_bytes`).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+from pathlib import Path
+
+from urpt_gcs.errors import PlanError, SettingsError, UrptError
+
+# Size caps of text inputs: far above any real file, far below what would exhaust memory.
+TARGETS_MAX_BYTES = 64 * 2**20
+MISSION_FILE_MAX_BYTES = 16 * 2**20
+GTSPLIB_MAX_BYTES = 64 * 2**20
+
+# The environment variable that sets the memory budget, in GiB.
+MEMORY_BUDGET_ENV = "URPT_GCS_MEMORY_GIB"
+_DEFAULT_BUDGET_BYTES = 4 * 2**30
+# Without a setting, the budget is the smaller of 4 GiB and this share of physical memory.
+_DEFAULT_BUDGET_SHARE = 0.5
+
+# The longest file name most file systems take (NAME_MAX).
+_NAME_MAX = 255
+
+_KINDS = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISDIR, "a folder"),
+)
+
+
+def _kind(mode: int) -> str:
+    return next((kind for test, kind in _KINDS if test(mode)), "not a file")
+
+
+class MemoryBudgetError(PlanError):
+    """An array the inputs call for would not fit the memory budget."""
+
+
+def shown_path(path: Path | str, limit: int = 200) -> str:
+    """A path for a message: one line, at most ``limit`` characters, quoted."""
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(path))
+    return f"'{text[:limit]}...'" if len(text) > limit else f"'{text}'"
+
+
+def require_regular_file(
+    path: Path, what: str, flag: str, error: type[UrptError]
+) -> os.stat_result:
+    """Check that ``path`` is, or links to, a regular file, before anyone opens it.
+
+    Parameters
+    ----------
+    path
+        The file as the operator gave it.
+    what
+        What the file is, for the message: ``"DEM"``, ``"targets file"``, ...
+    flag
+        Where the operator gave it, for the fix: ``"--dem"``, ``"urpt-gcs upload"``, ...
+    error
+        The error class to raise (the reader's own).
+
+    Returns
+    -------
+    os.stat_result
+        The status of the file the path resolves to.
+
+    Raises
+    ------
+    UrptError
+        Of class ``error``, with one line naming the file and what to give instead: if the
+        path does not exist, is too long, or resolves to a folder, FIFO, device or socket.
+    """
+    name = f"{what} {shown_path(path)}"
+    try:
+        status = path.stat()
+    except FileNotFoundError:
+        # A dangling link exists as a name; saying so saves a puzzled operator a minute.
+        dangling = path.is_symlink()
+        problem = "is a link to a file that does not exist" if dangling else "does not exist"
+        raise error(f"{name} {problem}: check the path given to {flag}") from None
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            longest = max((len(part) for part in path.parts), default=0)
+            figure = (
+                f"a name of {longest} characters"
+                if longest > _NAME_MAX
+                else f"a path of {len(str(path))} characters"
+            )
+            raise error(
+                f"{name} has {figure}, too long for the file system: "
+                f"give {flag} a shorter path (move or rename the file)"
+            ) from None
+        reason = exc.strerror or type(exc).__name__
+        raise error(f"{name} cannot be read ({reason}): check the path given to {flag}") from None
+    if stat.S_ISREG(status.st_mode):
+        return status
+    kind = _kind(status.st_mode)
+    if path.is_symlink():
+        kind = f"a link to {shown_path(path.resolve())}, {kind}"
+    if stat.S_ISDIR(status.st_mode):
+        raise error(f"{name} is {kind}: give {flag} the file inside it")
+    raise error(f"{name} is {kind}, not a regular file: give {flag} a regular file")
+
+
+def read_capped(
+    path: Path, what: str, flag: str, error: type[UrptError], cap_bytes: int, fix: str
+) -> bytes:
+    """The bytes of a regular file of at most ``cap_bytes``, read with a bounded read.
+
+    Parameters
+    ----------
+    path, what, flag, error
+        As for :func:`require_regular_file`.
+    cap_bytes
+        The largest file accepted.
+    fix
+        What to do about a file over the cap, for the message.
+
+    Raises
+    ------
+    UrptError
+        Of class ``error``: everything :func:`require_regular_file` refuses, a file over the
+        cap (by its size, or by what a read finds if it grows), or a file that cannot be read.
+    """
+    status = require_regular_file(path, what, flag, error)
+    name = f"{what} {shown_path(path)}"
+    if status.st_size > cap_bytes:
+        raise error(_over_cap(name, status.st_size, cap_bytes, fix))
+    try:
+        # O_NONBLOCK: if the path was swapped for a FIFO since the check, open must not hang.
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise error(f"{name} cannot be read ({reason}): check the file's permissions") from None
+    with os.fdopen(fd, "rb") as stream:
+        if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+            raise error(f"{name} is no longer a regular file: give {flag} a regular file")
+        try:
+            data = stream.read(cap_bytes + 1)
+        except OSError as exc:
+            reason = exc.strerror or type(exc).__name__
+            raise error(f"{name} cannot be read ({reason}): check the file") from None
+    if len(data) > cap_bytes:
+        raise error(_over_cap(name, len(data), cap_bytes, fix, grew=True))
+    return data
+
+
+def _over_cap(name: str, size: int, cap_bytes: int, fix: str, grew: bool = False) -> str:
+    figure = f"grew past {_size(cap_bytes)} while read" if grew else f"is {_size(size)}"
+    return f"{name} {figure}, over the {_size(cap_bytes)} limit: {fix}"
+
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{int(nbytes)} bytes"
+
+
+def _gib(nbytes: float) -> str:
+    gib = nbytes / 2**30
+    if gib < 10.0:  # enough digits that an estimate just over the budget reads as over it
+        return f"{gib:.2f} GiB"
+    return f"{gib:.1f} GiB" if gib < 1e6 else f"{gib:.1e} GiB"
+
+
+def memory_budget_bytes() -> int:
+    """How much memory one plan's big arrays may take.
+
+    ``URPT_GCS_MEMORY_GIB`` in the environment sets it; otherwise it is the smaller of 4 GiB
+    and half the physical memory.
+
+    Raises
+    ------
+    SettingsError
+        If ``URPT_GCS_MEMORY_GIB`` is not a positive number.
+    """
+    text = os.environ.get(MEMORY_BUDGET_ENV)
+    if text is not None:
+        try:
+            gib = float(text)
+        except ValueError:
+            gib = float("nan")
+        if not gib > 0.0 or gib == float("inf"):
+            raise SettingsError(
+                f"{MEMORY_BUDGET_ENV}={text!r} is not a positive number of GiB: "
+                "set it to e.g. 4, or unset it"
+            )
+        return int(gib * 2**30)
+    try:
+        physical = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return _DEFAULT_BUDGET_BYTES
+    return int(min(_DEFAULT_BUDGET_BYTES, _DEFAULT_BUDGET_SHARE * physical))
+
+
+def require_memory(nbytes: float, what: str, fix: str) -> None:
+    """Refuse, before allocating, an array (or set of arrays) over the memory budget.
+
+    Parameters
+    ----------
+    nbytes
+        The estimated size in bytes.
+    what
+        What would be allocated, for the message: ``"a DEM window of 40000 x 40000 cells"``.
+    fix
+        What the operator can change: ``"lower --altitude/--clearance or narrow the camera"``.
+
+    Raises
+    ------
+    MemoryBudgetError
+        One line naming ``what``, the estimate and the budget in GiB, and ``fix``.
+    """
+    budget = memory_budget_bytes()
+    if nbytes > budget:
+        raise MemoryBudgetError(
+            f"{what} would need {_gib(nbytes)}, over the memory budget of "
+            f"{_gib(budget)} ({MEMORY_BUDGET_ENV}): {fix}"
+        )
