@@ -464,6 +464,17 @@ def test_unfit_item_is_refused_before_any_transfer(params: tuple, expected: str)
     assert expected in str(raised.value)
 
 
+def test_a_waypoint_below_home_uploads_with_a_warning() -> None:
+    item = MissionItem(WAYPOINT, RELATIVE, (2, 0, 0, 0, 47.3978, 8.5456, -5.0))
+    mission = _one_item_mission(item)
+    with simulated(mission) as (_server, url):
+        report = upload(mission, url)
+    assert report.warnings == (
+        "mission item seq 1 (NAV_WAYPOINT) flies 5 m below home: make sure the ground there "
+        "is lower still, or correct the altitude",
+    )
+
+
 def test_more_items_than_mavlink_counts_is_refused_before_any_transfer() -> None:
     item = MissionItem(WAYPOINT, RELATIVE, (0, 0, 0, 0, 47.3978, 8.5456, 20.0))
     home = GeoPoint(47.3977420, 8.5455940, 488.0)

@@ -23,7 +23,14 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.mission import Firmware, GeoPoint, Mission, command_name, upload_problem
+from urpt_gcs.mission import (
+    Firmware,
+    GeoPoint,
+    Mission,
+    below_home,
+    command_name,
+    upload_problem,
+)
 from urpt_gcs.readback import WireItem, compare, wire_items
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
@@ -192,7 +199,7 @@ async def upload_verified(
     started = time.monotonic()
     refuse_unfit(mission)
     autopilot = await link.autopilot()
-    warnings: list[str] = []
+    warnings: list[str] = list(below_home(mission))
     if autopilot == "unknown":
         warnings.append(
             f"the vehicle does not say whether it runs ArduPilot or PX4: uploaded with "

@@ -469,6 +469,21 @@ def upload_problem(mission: Mission) -> str | None:
     return None
 
 
+def below_home(mission: Mission) -> tuple[str, ...]:
+    """A warning for each item flown below home (relative altitude under 0), naming its seq.
+
+    Legal in a valley, but a mission planned at one altitude over the site never does it, and a
+    typo (-40 for 40) would fly into the ground.
+    """
+    first_seq = 1 if mission.firmware == "ardupilot" else 0
+    return tuple(
+        f"mission item seq {seq} ({command_name(item.command)}) flies {-item.z:g} m below "
+        "home: make sure the ground there is lower still, or correct the altitude"
+        for seq, item in enumerate(mission.items, start=first_seq)
+        if item.frame in RELATIVE_ALT_FRAMES and item.z < 0.0
+    )
+
+
 def command_name(command: int) -> str:
     """``NAV_WAYPOINT`` for 16: the MAV_CMD name without its prefix."""
     entry = mavlink.enums["MAV_CMD"].get(command)
