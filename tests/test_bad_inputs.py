@@ -13,11 +13,13 @@ regression fails instead of hanging or eating the machine.
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import shutil
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -233,6 +235,7 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--targets", "%targets_100000.csv"],
         ["100000 targets in", "targets_100000.csv", "GiB", "plan fewer targets at a time"],
     ),
+    "seed_negative": (["@seed_negative.args"], ["--seed -1", "0 to 4294967295"]),
 }
 
 
@@ -386,22 +389,135 @@ UPLOAD_CASES: dict[str, tuple[str, list[str]]] = {
         "%upload_link_to_dev_urandom.plan",
         ["upload_link_to_dev_urandom.plan", "a link to '/dev/urandom', a character device"],
     ),
+    "upload_hold_negative": (
+        "upload_hold_negative.plan",
+        [
+            "upload_hold_negative.plan: mission item at index 2 (NAV_WAYPOINT)",
+            "param1 (hold) -5 s is out of range (ArduPilot would keep 65531 s)",
+            "give a hold of 0 to 65535 seconds",
+        ],
+    ),
+    "upload_yaw_huge": (
+        "upload_yaw_huge.plan",
+        [
+            "upload_yaw_huge.plan: mission item at index 2 (NAV_WAYPOINT)",
+            "param4 (yaw) 1e+20 deg is out of range",
+            "give a yaw of -360 to 360 degrees",
+        ],
+    ),
+    "upload_altitude_below_home": (
+        "upload_altitude_below_home.plan",
+        [
+            "upload_altitude_below_home.plan: mission item at index 2 (NAV_WAYPOINT)",
+            "altitude (param7) -1000 m relative to home (488 m AMSL) is -512 m AMSL",
+            "give an altitude of -988 m or more relative to home",
+        ],
+    ),
+    "upload_nan_param": (
+        "upload_nan_param.plan",
+        [
+            "upload_nan_param.plan: mission item at index 1 (DO_MOUNT_CONTROL)",
+            "param1 (pitch) is NaN",
+            "give a number",
+        ],
+    ),
+    "upload_waypoints_duplicate_seq": (
+        "upload_waypoints_duplicate_seq.waypoints",
+        [
+            "upload_waypoints_duplicate_seq.waypoints: line 7: seq 4, expected 5",
+            "a line is repeated or missing",
+        ],
+    ),
+    "upload_waypoints_seq_gap": (
+        "upload_waypoints_seq_gap.waypoints",
+        ["upload_waypoints_seq_gap.waypoints: line 7: seq 6, expected 5", "repeated or missing"],
+    ),
 }
+NOBODY = "udpin://127.0.0.1:14999"  # nothing listens: a connection attempt would wait 10 s
 
 
-@pytest.mark.parametrize("case", sorted(UPLOAD_CASES))
-def test_bad_upload_file(case: str, tmp_path: Path) -> None:
-    name, words = UPLOAD_CASES[case]
-    path = _expand([name], tmp_path)[0] if name.startswith("%") else str(BAD / name)
-    code, stderr = run_cli(
-        ["upload", path, "--connect", "udpin://127.0.0.1:14999"], in_child=name.startswith("%")
-    )
+def run_upload(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, float]:
+    """`urpt-gcs upload PATH` with a connection that must not be tried."""
+    from urpt_gcs import mavsdk_link
+
+    def no_connection(*_args: object, **_kwargs: object) -> None:
+        raise AssertionError("a connection was attempted")
+
+    monkeypatch.setattr(mavsdk_link, "connect", no_connection)
+    started = time.monotonic()
+    result = CliRunner().invoke(main, ["upload", str(path), "--connect", NOBODY, "--timeout", "10"])
+    return result.exit_code, result.stderr, time.monotonic() - started
+
+
+def assert_one_line(code: int, stderr: str, words: list[str]) -> None:
     assert code == 1, stderr
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("urpt-gcs: error: "), stderr
     assert "Traceback" not in stderr
     for word in words:
         assert word in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("case", sorted(UPLOAD_CASES))
+def test_bad_upload_file(case: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    name, words = UPLOAD_CASES[case]
+    if name.startswith("%"):
+        # Made at run time and read in a limited child, where a connection cannot be
+        # intercepted: nothing listens at NOBODY, so a refusal that came after trying to
+        # connect would name the connection, not the file.
+        path = _expand([name], tmp_path)[0]
+        code, stderr = run_cli(["upload", path, "--connect", NOBODY], in_child=True)
+        assert_one_line(code, stderr, words)
+        return
+    code, stderr, elapsed_s = run_upload(BAD / name, monkeypatch)
+    assert_one_line(code, stderr, words)
+    assert elapsed_s < 5.0, "refused before the 10 s connect timeout"
+
+
+@pytest.mark.parametrize("suffix", [".plan", ".waypoints"])
+def test_bad_upload_too_many_items(
+    suffix: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """65 559 items (as in the issue) would wrap MAVLink's uint16 count; too big to commit."""
+    item = [0, 0, 0, 0, 47.3981, 8.5461, 40]
+    count = 65_558  # and home: 65 559 on an ArduPilot
+    path = tmp_path / f"upload_too_many_items{suffix}"
+    if suffix == ".plan":
+        takeoff = {"type": "SimpleItem", "command": 22, "frame": 3, "autoContinue": True}
+        waypoint = {**takeoff, "command": 16, "params": item}
+        plan = {
+            "fileType": "Plan",
+            "version": 1,
+            "groundStation": "QGroundControl",
+            "mission": {
+                "version": 2,
+                "firmwareType": 3,
+                "vehicleType": 2,
+                "cruiseSpeed": 5,
+                "hoverSpeed": 5,
+                "plannedHomePosition": [47.3977, 8.5456, 488.0],
+                "items": [{**takeoff, "params": item}] + [waypoint] * (count - 1),
+            },
+            "geoFence": {"version": 2, "polygons": [], "circles": []},
+            "rallyPoints": {"version": 2, "points": []},
+        }
+        path.write_text(json.dumps(plan, separators=(",", ":")))
+    else:
+        fields = "\t".join(str(v) for v in item)
+        lines = ["QGC WPL 110", "0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5456\t488\t1"]
+        lines += [f"{seq}\t0\t3\t16\t{fields}\t1" for seq in range(1, count + 1)]
+        path.write_text("\n".join(lines) + "\n")
+    code, stderr, elapsed_s = run_upload(path, monkeypatch)
+    assert_one_line(
+        code,
+        stderr,
+        [
+            path.name,
+            "65559 mission items (65558 and ArduPilot's home item) are more than the 65535",
+            "plan fewer targets or split the mission into sorties",
+        ],
+    )
+    assert elapsed_s < 5.0
 
 
 def test_every_sample_file_is_in_the_catalogue() -> None:

@@ -303,3 +303,148 @@ def test_stage_progress_ticks_only_for_slow_stages() -> None:
     text = stream.getvalue()
     assert "reading targets" not in text
     assert "solving (10 viewpoints)" in text and "of 2 s" in text
+
+
+# --- what escapes a command: one line all the same ------------------------------------------
+
+
+def _root_with(exc: BaseException):
+    import click
+
+    from urpt_gcs.cli._root import RootGroup
+
+    @click.group(cls=RootGroup)
+    def root() -> None:
+        pass
+
+    @root.command()
+    def boom() -> None:
+        raise exc
+
+    return CliRunner().invoke(root, ["boom"])
+
+
+@pytest.mark.parametrize(
+    ("exc", "expected"),
+    [
+        (
+            OSError(36, "File name too long", "out/" + "x" * 300),
+            "urpt-gcs: error: 'out/xxxxxx",
+        ),
+        (OSError(28, "No space left on device"), "urpt-gcs: error: No space left on device: free"),
+        (
+            OSError(13, "Permission denied", "out", None, "out.tmp"),
+            "urpt-gcs: error: 'out' -> 'out.tmp'",
+        ),
+        (
+            MemoryError("Unable to allocate 40.1 GiB for an array with shape (5, 2) and type f8"),
+            "urpt-gcs: error: out of memory (Unable to allocate 40.1 GiB for an array",
+        ),
+    ],
+)
+def test_os_and_memory_errors_are_one_line(exc: BaseException, expected: str) -> None:
+    result = _root_with(exc)
+    assert result.exit_code == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(expected), result.stderr
+    assert "Traceback" not in result.stderr
+    if isinstance(exc, OSError) and exc.errno == 36:
+        assert "File name too long: give a shorter name" in lines[0]
+        assert len(lines[0]) < 200
+
+
+def test_ctrl_c_in_a_command_is_one_line_and_130() -> None:
+    result = _root_with(KeyboardInterrupt())
+    assert result.exit_code == 130
+    assert result.stderr == "urpt-gcs: interrupted\n"
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["demo-site", "--seed", "-1"], "--seed -1 is out of range; use 0 to 4294967295"),
+        (
+            ["sitl", "--seed", "-1", "--listen", "udpout://127.0.0.1:14998"],
+            "--seed -1 is out of range; use 0 to 4294967295",
+        ),
+        (["bench", "gtsplib", ".", "--runs", "0"], "--runs 0 is below 1"),
+    ],
+)
+def test_every_seed_is_checked(args: list[str], expected: str) -> None:
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], result.stderr
+
+
+def test_seed_above_32_bits_is_refused(site: dict[str, Path]) -> None:
+    out = site["tmp"] / "out"
+    args = ["--dem", str(site["dem"]), "--targets", str(site["targets"]), "--out", str(out)]
+    result = _run(["plan", *args, "--seed", str(2**32)])
+    _assert_clean_failure(result, out, "--seed 4294967296 is out of range; use 0 to 4294967295")
+
+
+# --- Ctrl-C on the installed program ---------------------------------------------------------
+
+
+def _installed() -> Path:
+    import sys
+
+    program = Path(sys.executable).parent / "urpt-gcs"
+    if not program.exists():
+        pytest.skip("urpt-gcs is not installed beside this interpreter")
+    return program
+
+
+def _interrupt(tmp_path: Path, when: str, env: dict[str, str] | None = None) -> tuple[int, str]:
+    """Start `urpt-gcs plan` on the demo site, send SIGINT at ``when``; exit status, stderr."""
+    import signal
+    import subprocess
+    import time
+
+    from conftest import DEMO
+
+    args = [str(_installed()), "plan", "--dem", str(DEMO / "site.tif")]
+    args += ["--targets", str(DEMO / "targets.kml"), "--out", str(tmp_path / "out"), "--no-map"]
+    process = subprocess.Popen(
+        args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    maps = Path(f"/proc/{process.pid}/maps")
+    if when == "during import":
+        # numpy is the first heavy library the command line loads; rasterio, numba and the
+        # planner come after it.
+        deadline = time.monotonic() + 30.0
+        while "numpy" not in maps.read_text() and time.monotonic() < deadline:
+            time.sleep(0.002)
+    elif when != "at once":
+        time.sleep(float(when))
+    process.send_signal(signal.SIGINT)
+    _out, err = process.communicate(timeout=120)
+    return process.returncode, err
+
+
+def test_ctrl_c_at_once_is_never_a_traceback(tmp_path: Path) -> None:
+    import signal
+
+    code, err = _interrupt(tmp_path, "at once")
+    # So early, the interpreter may not have its own handler yet and dies of the signal
+    # itself (a shell shows 130 for that too), silently.
+    assert code in (130, -signal.SIGINT), err
+    assert err in ("", "urpt-gcs: interrupted\n"), err
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs /proc")
+def test_ctrl_c_while_modules_load_is_one_line_and_130(tmp_path: Path) -> None:
+    code, err = _interrupt(tmp_path, "during import")
+    assert (code, err) == (130, "urpt-gcs: interrupted\n")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("when", ["1.0", "2.0", "3.0"])
+def test_ctrl_c_while_planning_is_one_line_and_130(when: str, tmp_path: Path) -> None:
+    """Also while numba compiles (a cold cache), where Ctrl-C lands in callbacks from C."""
+    import os
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    code, err = _interrupt(tmp_path, when, env)
+    assert (code, err) == (130, "urpt-gcs: interrupted\n")

@@ -406,6 +406,21 @@ def _plan_with(change: str) -> str:
         body["items"][2]["params"][4] = None
     elif change == "huge integer":
         body["items"][2]["params"][0] = 10**400
+    elif change == "negative hold":
+        body["items"][2]["params"][0] = -5
+    elif change == "yaw 1e20":
+        body["items"][2]["params"][3] = 1e20
+    elif change == "below any ground":
+        body["items"][2]["params"][6] = -1000.0
+    elif change == "null hold":
+        body["items"][2]["params"][0] = None
+    elif change == "latitude 95":
+        body["items"][2]["params"][4] = 95.0
+    elif change == "zero speed":
+        speed = {**body["items"][1], "command": 178, "params": [1, 0, -1, 0, 0, 0, 0]}
+        body["items"].insert(1, speed)
+    elif change == "65535 items":
+        body["items"] += [body["items"][2]] * (65_535 - len(body["items"]))
     return json.dumps(plan)
 
 
@@ -426,6 +441,30 @@ BAD_PLANS = {
     "text param": (_plan_with("text param"), "index 3: params must be a list of 7 numbers"),
     "null latitude": (_plan_with("null latitude"), "index 2: params 5-7 (x, y, z) must be numbers"),
     "huge integer": (_plan_with("huge integer"), "index 2: params must be a list"),
+    "negative hold": (
+        _plan_with("negative hold"),
+        "index 2 (NAV_WAYPOINT): param1 (hold) -5 s is out of range (ArduPilot would keep "
+        "65531 s): give a hold of 0 to 65535 seconds",
+    ),
+    "yaw 1e20": (
+        _plan_with("yaw 1e20"),
+        "index 2 (NAV_WAYPOINT): param4 (yaw) 1e+20 deg is out of range: give a yaw of -360",
+    ),
+    "below any ground": (
+        _plan_with("below any ground"),
+        "index 2 (NAV_WAYPOINT): altitude (param7) -1000 m relative to home (488.5 m AMSL) is "
+        "-511.5 m AMSL, below the lowest ground on Earth: give an altitude of -988.5 m or more",
+    ),
+    "null hold": (_plan_with("null hold"), "index 2 (NAV_WAYPOINT): param1 (hold) is NaN"),
+    "latitude 95": (_plan_with("latitude 95"), "latitude (param5) 95 is not in [-90, 90]"),
+    "zero speed": (
+        _plan_with("zero speed"),
+        "index 1 (DO_CHANGE_SPEED): param2 (speed) 0 m/s is out of range: give a speed above 0",
+    ),
+    "65535 items": (
+        _plan_with("65535 items"),
+        "65536 mission items (65535 and ArduPilot's home item) are more than the 65535",
+    ),
 }
 
 
@@ -466,6 +505,26 @@ BAD_WAYPOINTS = {
     "home off the globe": (
         _waypoints_with(1, "0\t1\t0\t16\t0\t0\t0\t0\t147.1\t8.5\t40\t1"),
         "line 2 (home) is not usable",
+    ),
+    "duplicated line": (
+        _waypoints_with(3, "2\t0\t3\t16\t0\t0\t0\t0\t47.1\t8.5\t40\t1\n" * 2),
+        "line 5: seq 2, expected 3: seq must count 0 (home), 1, 2, ... one line per item",
+    ),
+    "home seq 1": (
+        _waypoints_with(1, "1\t1\t0\t16\t0\t0\t0\t0\t47.1\t8.5\t400\t1"),
+        "line 2: seq 1, expected 0",
+    ),
+    "current 2": (
+        _waypoints_with(3, "2\t2\t3\t16\t0\t0\t0\t0\t47.1\t8.5\t40\t1"),
+        "line 4: current 2 is not 0 or 1",
+    ),
+    "negative hold": (
+        _waypoints_with(3, "2\t0\t3\t16\t-5\t0\t0\t0\t47.1\t8.5\t40\t1"),
+        "line 4 (NAV_WAYPOINT): param1 (hold) -5 s is out of range",
+    ),
+    "65536 lines": (
+        "QGC WPL 110\n" + "0\t0\t3\t16\t0\t0\t0\t0\t47.1\t8.5\t40\t1\n" * 65_536,
+        "65536 mission items (65535 and ArduPilot's home item) are more than the 65535",
     ),
 }
 

@@ -25,7 +25,7 @@ from simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs import mavsdk_link
 from urpt_gcs.cli import main
-from urpt_gcs.errors import LinkError
+from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.link import (
     AutopilotKind,
     LinkTimeout,
@@ -36,7 +36,14 @@ from urpt_gcs.link import (
     upload,
     upload_verified,
 )
-from urpt_gcs.mission import GeoPoint, Mission, MissionItem, MissionSettings, build_mission
+from urpt_gcs.mission import (
+    GeoPoint,
+    Mission,
+    MissionItem,
+    MissionSettings,
+    build_mission,
+    upload_problem,
+)
 from urpt_gcs.readback import WireItem, compare, wire_items
 from urpt_gcs.sitl.server import SitlServer
 from urpt_gcs.sitl.store import Item, ardupilot_stored
@@ -113,6 +120,30 @@ def test_no_vehicle_is_one_clear_line() -> None:
     assert result.exit_code == 1
     assert result.stderr.startswith("urpt-gcs: error: no autopilot heard on udpin://127.0.0.1:9")
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ("firmware", "suffix"),
+    [("ardupilot", ".plan"), ("ardupilot", ".waypoints"), ("px4", ".plan")],
+)
+def test_what_the_planner_writes_passes_the_checks_and_reads_back(
+    firmware: str, suffix: str, tmp_path
+) -> None:
+    """The checks before upload refuse nothing the planner writes, for either firmware."""
+    from urpt_gcs.formats import plan_json, waypoints_text
+
+    demo = demo_mission()
+    waypoints = [(i.params[4], i.params[5]) for i in demo.items if i.command == WAYPOINT]
+    settings_ = MissionSettings(firmware=firmware, hold_s=2.5)  # type: ignore[arg-type]
+    mission = build_mission(demo.home, waypoints, demo.altitude_rel_m, settings_)
+    assert upload_problem(mission) is None
+    path = tmp_path / f"mission{suffix}"
+    path.write_text(plan_json(mission) if suffix == ".plan" else waypoints_text(mission))
+    with simulated(mission, px4=firmware == "px4") as (server, url):
+        result = CliRunner().invoke(main, ["upload", str(path), "--connect", url])
+        assert result.exit_code == 0, result.stderr
+        assert_holds(server, mission)
+    assert "read back identical" in result.output
 
 
 # --- firmware conventions --------------------------------------------------------------------
@@ -394,20 +425,68 @@ def _one_item_mission(item: MissionItem) -> Mission:
 
 
 @pytest.mark.parametrize(
-    ("frame", "params", "expected"),
+    ("command", "frame", "expected"),
     [
-        (mavlink.MAV_FRAME_LOCAL_NED, (0, 0, 0, 0), "MAV_MISSION_UNSUPPORTED_FRAME"),
-        (RELATIVE, (math.nan, 0, 0, 0), "MAV_MISSION_INVALID_PARAM1"),
+        (WAYPOINT, mavlink.MAV_FRAME_LOCAL_NED, "MAV_MISSION_UNSUPPORTED_FRAME"),
+        (mavlink.MAV_CMD_NAV_LOITER_TURNS, RELATIVE, "MAV_MISSION_UNSUPPORTED"),
     ],
 )
-def test_refusal_names_the_mission_ack(frame: int, params: tuple, expected: str) -> None:
-    item = MissionItem(WAYPOINT, frame, (*params, 47.3978, 8.5456, 20.0))
+def test_refusal_names_the_mission_ack(command: int, frame: int, expected: str) -> None:
+    item = MissionItem(command, frame, (0, 0, 0, 0, 47.3978, 8.5456, 20.0))
     with simulated() as (_server, url), pytest.raises(MissionRejected) as raised:
         upload(_one_item_mission(item), url)
     assert raised.value.result == expected
     assert raised.value.seq == 1
     assert str(raised.value).startswith(f"{expected}: the vehicle on {url} refused mission")
-    assert "item seq 1 (NAV_WAYPOINT): correct it in the plan" in str(raised.value)
+    name = mavlink.enums["MAV_CMD"][command].name.removeprefix("MAV_CMD_")
+    assert f"item seq 1 ({name}): correct it in the plan" in str(raised.value)
+
+
+@pytest.mark.parametrize(
+    ("params", "expected"),
+    [
+        ((math.nan, 0, 0, 0, 47.3978, 8.5456, 20.0), "param1 (hold) is NaN"),
+        ((-5, 0, 0, 0, 47.3978, 8.5456, 20.0), "param1 (hold) -5 s is out of range"),
+        ((2, 0, 0, 1e20, 47.3978, 8.5456, 20.0), "param4 (yaw) 1e+20 deg is out of range"),
+        ((2, 0, 0, 0, 47.3978, 8.5456, -1000.0), "-512 m AMSL, below the lowest ground"),
+        ((2, 0, 0, 0, 91.0, 8.5456, 20.0), "latitude (param5) 91 is not in [-90, 90]"),
+    ],
+)
+def test_unfit_item_is_refused_before_any_transfer(params: tuple, expected: str) -> None:
+    mission = _one_item_mission(MissionItem(WAYPOINT, RELATIVE, params))
+    with simulated() as (server, url):
+        started = time.monotonic()
+        with pytest.raises(SettingsError) as raised:
+            upload(mission, url)
+        assert time.monotonic() - started < 0.5, "refused before connecting"
+        assert len(server.vehicle.store) == 1  # nothing stored but home
+    assert str(raised.value).startswith("not uploaded: mission item seq 1 (NAV_WAYPOINT): ")
+    assert expected in str(raised.value)
+
+
+def test_a_waypoint_below_home_uploads_with_a_warning() -> None:
+    item = MissionItem(WAYPOINT, RELATIVE, (2, 0, 0, 0, 47.3978, 8.5456, -5.0))
+    mission = _one_item_mission(item)
+    with simulated(mission) as (_server, url):
+        report = upload(mission, url)
+    assert report.warnings == (
+        "mission item seq 1 (NAV_WAYPOINT) flies 5 m below home: make sure the ground there "
+        "is lower still, or correct the altitude",
+    )
+
+
+def test_more_items_than_mavlink_counts_is_refused_before_any_transfer() -> None:
+    item = MissionItem(WAYPOINT, RELATIVE, (0, 0, 0, 0, 47.3978, 8.5456, 20.0))
+    home = GeoPoint(47.3977420, 8.5455940, 488.0)
+    fits = Mission(home, (item,) * 65_534, "ardupilot", 20.0, 5.0, 5.0)
+    assert upload_problem(fits) is None
+    with pytest.raises(SettingsError) as raised:
+        upload(replace(fits, items=(item,) * 65_535), "udpin://127.0.0.1:14999")
+    assert str(raised.value) == (
+        "not uploaded: 65536 mission items (65535 and ArduPilot's home item) are more than the "
+        "65535 a MAVLink mission can hold: plan fewer targets or split the mission into sorties"
+    )
+    assert upload_problem(replace(fits, items=(item,) * 65_535, firmware="px4")) is None
 
 
 def test_nan_param4_of_a_waypoint_reads_back_as_zero_and_counts_as_equal() -> None:

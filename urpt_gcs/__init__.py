@@ -3,13 +3,37 @@
 ``plan(dem, targets, settings)`` runs the whole pipeline and returns a :class:`Plan`; the
 stages are modules of their own (terrain, targets, visibility, gtsp, solvers, mission,
 formats) for anyone who wants to call them one by one.
+
+The planner (numpy, rasterio, numba ...) is imported on first use of ``plan``, ``Plan`` or
+``PlanSettings``, so that the command line starts, and answers Ctrl-C, before it has loaded.
 """
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+from typing import TYPE_CHECKING, Any
 
 from urpt_gcs.errors import UrptError
-from urpt_gcs.planner import Plan, PlanSettings, plan
+
+__version__ = "0.1.0"
+
+if TYPE_CHECKING:
+    from urpt_gcs.planner import Plan, PlanSettings, plan
 
 __all__ = ["Plan", "PlanSettings", "UrptError", "__version__", "plan"]
+_FROM_PLANNER = frozenset({"Plan", "PlanSettings", "plan"})
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: the first `urpt_gcs.plan` imports the planner; Python caches nothing here, so
+    # the names are bound into the module to make later look-ups ordinary ones.
+    if name in _FROM_PLANNER:
+        from urpt_gcs import planner
+
+        for exported in _FROM_PLANNER:
+            globals()[exported] = getattr(planner, exported)
+        return globals()[name]
+    raise AttributeError(f"module 'urpt_gcs' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | _FROM_PLANNER)

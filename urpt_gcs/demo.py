@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from pyproj import Transformer
 from rasterio.transform import Affine
 
-from urpt_gcs.errors import OutputError
+from urpt_gcs.errors import OutputError, SettingsError
 
 EPSG = 32632
 WEST_M, NORTH_M = 531_500.0, 5_282_200.0
@@ -245,9 +245,13 @@ def make_demo_site(out_dir: Path, seed: int = 7) -> DemoSite:
 
     Raises
     ------
+    SettingsError
+        If ``seed`` is negative or above 2**32 - 1.
     OutputError
         If the folder or a file in it cannot be written.
     """
+    if not 0 <= seed <= 2**32 - 1:
+        raise SettingsError(f"--seed {seed} is out of range; use 0 to {2**32 - 1}")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -23,8 +23,15 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.mission import Firmware, GeoPoint, Mission
-from urpt_gcs.readback import WireItem, command_name, compare, wire_items
+from urpt_gcs.mission import (
+    Firmware,
+    GeoPoint,
+    Mission,
+    below_home,
+    command_name,
+    upload_problem,
+)
+from urpt_gcs.readback import WireItem, compare, wire_items
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
 READBACK_S_PER_ITEM = 1.0
@@ -180,6 +187,9 @@ async def upload_verified(
 
     Raises
     ------
+    SettingsError
+        Before anything is sent, if the mission has more items than MAVLink can count or an
+        item holds a value no vehicle should be given (:func:`refuse_unfit`).
     LinkError
         If the vehicle refuses the mission (:class:`MissionRejected`), runs another firmware,
         or no attempt ends in a matching read-back.
@@ -187,8 +197,9 @@ async def upload_verified(
     settings = settings or UploadSettings()
     say = progress or (lambda _msg: None)
     started = time.monotonic()
+    refuse_unfit(mission)
     autopilot = await link.autopilot()
-    warnings: list[str] = []
+    warnings: list[str] = list(below_home(mission))
     if autopilot == "unknown":
         warnings.append(
             f"the vehicle does not say whether it runs ArduPilot or PX4: uploaded with "
@@ -250,6 +261,18 @@ async def upload_verified(
         f"mission not verified on {link.url} after {attempts} attempts: {problem}; the "
         "vehicle may hold a partial mission: do not fly it"
     )
+
+
+def refuse_unfit(mission: Mission) -> None:
+    """Raise :class:`SettingsError` for a mission that must not reach a vehicle.
+
+    A negative hold, an altitude below any ground, a yaw that is no angle or more than 65 535
+    items would be stored wrapped or truncated, or flown as something else, and the read-back
+    would still match; so they are refused before any transfer.
+    """
+    problem = upload_problem(mission)
+    if problem is not None:
+        raise SettingsError(f"not uploaded: {problem}")
 
 
 # Refusals that can come from the link or a passing state, not from the mission.
@@ -390,6 +413,7 @@ async def upload_async(
     """:func:`upload` for a caller already inside an event loop."""
     settings = settings or UploadSettings()
     say = progress or (lambda _msg: None)
+    refuse_unfit(mission)  # before a connection is even tried
     from urpt_gcs.mavsdk_link import connect
 
     say(f"waiting for an autopilot on {url}")
@@ -433,6 +457,8 @@ def upload(
 
     Raises
     ------
+    SettingsError
+        Before connecting, for a mission no vehicle should be given (:func:`refuse_unfit`).
     LinkError
         With a one-line reason: no vehicle, wrong firmware, a refusal naming the MISSION_ACK
         result, or no verified read-back after every retry.

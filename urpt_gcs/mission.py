@@ -267,3 +267,233 @@ def build_mission(
         cruise_speed_m_s=settings.cruise_speed_m_s,
         hover_speed_m_s=settings.hover_speed_m_s,
     )
+
+
+# --- what a vehicle can be given -----------------------------------------------------------
+
+# MISSION_COUNT.count and every item's seq are uint16: a longer mission wraps to a short one.
+MAX_MISSION_ITEMS = 65_535
+# Below the lowest dry land (the Dead Sea shore, about -430 m), with room for an ellipsoidal
+# vertical datum: no multirotor flies there.
+LOWEST_AMSL_M = -500.0
+# ArduPilot keeps a location's altitude in 24 bits of centimetres (AP_Mission's PackedLocation)
+# and refuses larger values (MAV_MISSION_INVALID_PARAM7).
+LOCATION_ALT_MAX_M = 83_000.0
+# ArduPilot keeps NAV_WAYPOINT's hold and NAV_LOITER_TIME's time as a uint16 of whole seconds:
+# -5 becomes 65531 (AP_Mission::mavlink_int_to_mission_cmd).
+UINT16_SECONDS_MAX = 65_535.0
+# params 1-4 and z travel as float32; anything larger arrives as infinity.
+FLOAT32_MAX = 3.4028234663852886e38
+_INT32_MAX = 2**31 - 1
+
+RELATIVE_ALT_FRAMES = frozenset(
+    {mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT}
+)
+TERRAIN_ALT_FRAMES = frozenset(
+    {mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT, mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT}
+)
+# ArduPilot accepts NaN ("unset") in params 1-4 only as param4 (yaw) of these commands.
+_AP_NAN_PARAM4 = frozenset(
+    {mavlink.MAV_CMD_NAV_WAYPOINT, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND}
+)
+
+
+@dataclass(frozen=True, slots=True)
+class _Range:
+    """A param a command uses: its name, unit, valid interval, and whether NaN means unset."""
+
+    name: str
+    unit: str
+    low: float
+    high: float
+    nan_ok: bool = False
+    low_open: bool = False
+    fix: str = ""
+
+
+def _angle(name: str, nan_ok: bool = False) -> _Range:
+    return _Range(name, "deg", -360.0, 360.0, nan_ok, fix=f"give a {name} of -360 to 360 degrees")
+
+
+def _seconds(name: str) -> _Range:
+    return _Range(name, "s", 0.0, UINT16_SECONDS_MAX, fix=f"give a {name} of 0 to 65535 seconds")
+
+
+_YAW = _angle("yaw", nan_ok=True)
+# The params each command uses (None: not used) and what they may hold (MAVLink's MAV_CMD
+# definitions; the uint16 limits are ArduPilot's storage).
+_PARAMS: dict[int, tuple[_Range | None, _Range | None, _Range | None, _Range | None]] = {
+    mavlink.MAV_CMD_NAV_WAYPOINT: (
+        _seconds("hold"),
+        _Range("acceptance radius", "m", 0.0, FLOAT32_MAX, fix="give a radius of 0 m or more"),
+        None,
+        _YAW,
+    ),
+    mavlink.MAV_CMD_NAV_LOITER_TIME: (_seconds("loiter time"), None, None, _YAW),
+    mavlink.MAV_CMD_NAV_LOITER_UNLIM: (None, None, None, _YAW),
+    mavlink.MAV_CMD_NAV_TAKEOFF: (None, None, None, _YAW),
+    mavlink.MAV_CMD_NAV_LAND: (None, None, None, _YAW),
+    mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: (None, None, None, None),
+    mavlink.MAV_CMD_CONDITION_DELAY: (_seconds("delay"), None, None, None),
+    mavlink.MAV_CMD_DO_CHANGE_SPEED: (
+        _Range("speed type", "", 0.0, 3.0, fix="give a speed type of 0 to 3 (SPEED_TYPE)"),
+        _Range(
+            "speed",
+            "m/s",
+            0.0,
+            FLOAT32_MAX,
+            low_open=True,
+            fix="give a speed above 0 m/s, or remove the item",
+        ),
+        _Range("throttle", "%", -2.0, 100.0, fix="give 0 to 100 %, or -1 for no change"),
+        None,
+    ),
+    mavlink.MAV_CMD_DO_MOUNT_CONTROL: (_angle("pitch"), _angle("roll"), _angle("yaw"), None),
+    mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW: (
+        _Range("pitch", "deg", -180.0, 180.0, True, fix="give a pitch of -180 to 180 degrees"),
+        _angle("yaw", nan_ok=True),
+        None,
+        None,
+    ),
+    mavlink.MAV_CMD_IMAGE_START_CAPTURE: (
+        None,
+        _Range("interval", "s", 0.0, FLOAT32_MAX, fix="give an interval of 0 s or more"),
+        _Range("image count", "", 0.0, FLOAT32_MAX, fix="give 0 (until stopped) or more images"),
+        None,
+    ),
+}
+
+
+def item_problem(item: MissionItem, home: GeoPoint, firmware: Firmware) -> str | None:
+    """Why ``item`` must not be uploaded, or None if nothing is wrong with it.
+
+    Parameters
+    ----------
+    item
+        The mission item.
+    home
+        The mission's home; altitudes relative to home are judged against its ``amsl_m``.
+    firmware
+        Whose conventions apply (ArduPilot refuses NaN in most params and keeps holds as
+        whole seconds in 16 bits).
+
+    Returns
+    -------
+    str or None
+        One clause naming the field, its value and the fix, e.g.
+        ``"param1 (hold) -5 s is out of range: give a hold of 0 to 65535 seconds"``.
+    """
+    ranges = _PARAMS.get(item.command, (None, None, None, None))
+    for index, (value, spec) in enumerate(zip(item.params[:4], ranges, strict=True)):
+        field = f"param{index + 1}" + (f" ({spec.name})" if spec is not None else "")
+        if math.isnan(value):
+            allowed = spec.nan_ok if spec is not None else True
+            if firmware == "ardupilot" and not (index == 3 and item.command in _AP_NAN_PARAM4):
+                allowed = False
+            if not allowed:
+                return (
+                    f"{field} is NaN (null in a .plan), which the vehicle cannot use: give a number"
+                )
+            continue
+        if abs(value) > FLOAT32_MAX:
+            return f"{field} {value:g} does not fit a MAVLink param: give a finite number"
+        if spec is None:
+            continue
+        unit = f" {spec.unit}" if spec.unit else ""
+        too_low = value <= spec.low if spec.low_open else value < spec.low
+        if too_low or value > spec.high:
+            kept = ""
+            if firmware == "ardupilot" and spec.high == UINT16_SECONDS_MAX:
+                kept = f" (ArduPilot would keep {int(value) % 65_536} s)"
+            return f"{field} {value:g}{unit} is out of range{kept}: {spec.fix}"
+    if not item.is_global:
+        for name, value in (("param5 (x)", item.params[4]), ("param6 (y)", item.params[5])):
+            if abs(value) > _INT32_MAX:
+                return f"{name} {value:g} does not fit MAVLink's int32 field: give a smaller value"
+        if abs(item.z) > FLOAT32_MAX:
+            return f"param7 (z) {item.z:g} does not fit a MAVLink param: give a finite number"
+        return None
+    return _location_problem(item, home)
+
+
+def _location_problem(item: MissionItem, home: GeoPoint) -> str | None:
+    lat, lon, z = item.params[4], item.params[5], item.z
+    if not -90.0 <= lat <= 90.0:
+        return f"latitude (param5) {lat:g} is not in [-90, 90]: give the item's position"
+    if not -180.0 <= lon <= 180.0:
+        return f"longitude (param6) {lon:g} is not in [-180, 180]: give the item's position"
+    if abs(z) >= LOCATION_ALT_MAX_M:
+        return (
+            f"altitude (param7) {z:g} m is beyond the {LOCATION_ALT_MAX_M:g} m a vehicle can "
+            "store: give the altitude in metres"
+        )
+    if item.frame in TERRAIN_ALT_FRAMES:
+        if z < 0.0:
+            return (
+                f"altitude (param7) {z:g} m above terrain is below the ground: give a height "
+                "above the terrain of 0 m or more"
+            )
+        return None
+    if item.frame in RELATIVE_ALT_FRAMES:
+        amsl = home.amsl_m + z
+        if amsl < LOWEST_AMSL_M:
+            return (
+                f"altitude (param7) {z:g} m relative to home ({home.amsl_m:g} m AMSL) is "
+                f"{amsl:g} m AMSL, below the lowest ground on Earth: give an altitude of "
+                f"{LOWEST_AMSL_M - home.amsl_m:g} m or more relative to home"
+            )
+    elif z < LOWEST_AMSL_M:
+        return (
+            f"altitude (param7) {z:g} m AMSL is below the lowest ground on Earth: give the "
+            "altitude above mean sea level in metres"
+        )
+    return None
+
+
+def count_problem(items: int, firmware: Firmware) -> str | None:
+    """Why a mission of ``items`` items (home excluded) is too long for any vehicle, or None.
+
+    MAVLink counts a mission's items in 16 bits; ArduPilot's home item counts too.
+    """
+    count = items + (1 if firmware == "ardupilot" else 0)
+    if count <= MAX_MISSION_ITEMS:
+        return None
+    with_home = f" ({items} and ArduPilot's home item)" if firmware == "ardupilot" else ""
+    return (
+        f"{count} mission items{with_home} are more than the {MAX_MISSION_ITEMS} a MAVLink "
+        "mission can hold: plan fewer targets or split the mission into sorties"
+    )
+
+
+def upload_problem(mission: Mission) -> str | None:
+    """The first reason ``mission`` must not be uploaded, naming the item by its seq; or None."""
+    problem = count_problem(len(mission.items), mission.firmware)
+    if problem is not None:
+        return problem
+    first_seq = 1 if mission.firmware == "ardupilot" else 0
+    for seq, item in enumerate(mission.items, start=first_seq):
+        problem = item_problem(item, mission.home, mission.firmware)
+        if problem is not None:
+            return f"mission item seq {seq} ({command_name(item.command)}): {problem}"
+    return None
+
+
+def below_home(mission: Mission) -> tuple[str, ...]:
+    """A warning for each item flown below home (relative altitude under 0), naming its seq.
+
+    Legal in a valley, but a mission planned at one altitude over the site never does it, and a
+    typo (-40 for 40) would fly into the ground.
+    """
+    first_seq = 1 if mission.firmware == "ardupilot" else 0
+    return tuple(
+        f"mission item seq {seq} ({command_name(item.command)}) flies {-item.z:g} m below "
+        "home: make sure the ground there is lower still, or correct the altitude"
+        for seq, item in enumerate(mission.items, start=first_seq)
+        if item.frame in RELATIVE_ALT_FRAMES and item.z < 0.0
+    )
+
+
+def command_name(command: int) -> str:
+    """``NAV_WAYPOINT`` for 16: the MAV_CMD name without its prefix."""
+    entry = mavlink.enums["MAV_CMD"].get(command)
+    return entry.name.removeprefix("MAV_CMD_") if entry is not None else f"command {command}"

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.mission import Firmware, Mission
+from urpt_gcs.mission import Firmware, Mission, command_name
 
 ALTITUDE_TOLERANCE_M = 0.01 + 1e-4
 MISSION_TYPE = mavlink.MAV_MISSION_TYPE_MISSION
@@ -144,12 +144,6 @@ def _ap_stored_z(z: float) -> float:
 
 
 # --- the comparison ------------------------------------------------------------------------
-
-
-def command_name(command: int) -> str:
-    """``NAV_WAYPOINT`` for 16: the MAV_CMD name without its prefix."""
-    entry = mavlink.enums["MAV_CMD"].get(command)
-    return entry.name.removeprefix("MAV_CMD_") if entry is not None else f"command {command}"
 
 
 def _same_param(sent: float, got: float) -> bool:

@@ -1,13 +1,19 @@
 """The root of the ``urpt-gcs`` command line and what its commands share.
 
-Only :class:`urpt_gcs.errors.UrptError` is caught: its message goes to stderr on one line and
-the exit status is 1. Usage errors (unknown flags, a word where a number belongs) exit 2.
+A :class:`urpt_gcs.errors.UrptError` goes to stderr on one line and the exit status is 1.
+Usage errors (unknown flags, a word where a number belongs) exit 2. What the library cannot
+foresee is still one line, exit 1: an ``OSError`` (a name too long, a full disk) names the file
+and a ``MemoryError`` the size it could not get. Ctrl-C prints ``urpt-gcs: interrupted`` and
+exits 130, as a shell reports a command stopped by SIGINT.
 """
 
 from __future__ import annotations
 
+import errno
+import os
 import sys
 from collections.abc import Callable
+from typing import Any, NoReturn
 
 import click
 
@@ -15,11 +21,77 @@ from urpt_gcs import __version__
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.mission import Mission
 
+INTERRUPTED_EXIT = 130  # 128 + SIGINT
+
 
 def fail(exc: UrptError) -> None:
     message = " ".join(str(exc).split())
     click.echo(f"urpt-gcs: error: {message}", err=True)
     sys.exit(1)
+
+
+def interrupted() -> NoReturn:
+    """Ctrl-C: one line on stderr, exit 130."""
+    click.echo("urpt-gcs: interrupted", err=True)
+    sys.exit(INTERRUPTED_EXIT)
+
+
+# What to do about the OSErrors an operator can cause or cure.
+_OS_FIXES = {
+    errno.ENAMETOOLONG: "give a shorter name",
+    errno.ENOSPC: "free some disk space or write elsewhere",
+    errno.EDQUOT: "free some disk space or write elsewhere",
+    errno.EACCES: "check its permissions or use another folder",
+    errno.EPERM: "check its permissions or use another folder",
+    errno.EROFS: "write to another folder",
+    errno.ENOENT: "check the path",
+    errno.ENOTDIR: "check the path: a part of it is a file",
+    errno.EISDIR: "give a file, not a folder",
+    errno.EMFILE: "close other programs' files and run again",
+    errno.ENOMEM: "free some memory and run again",
+}
+
+
+def os_error_message(exc: OSError) -> str:
+    """One line naming the file (when the error knows it), the reason and what to do."""
+    reason = exc.strerror or errno.errorcode.get(exc.errno or 0, "") or str(exc) or "I/O error"
+    fix = _OS_FIXES.get(exc.errno or 0, "check the path, the permissions and the free space")
+    names = [os.fsdecode(n) for n in (exc.filename, exc.filename2) if n is not None]
+    where = " -> ".join(f"'{_shorten(name)}'" for name in names)
+    return f"{where + ': ' if where else ''}{reason}: {fix}"
+
+
+def memory_error_message(exc: MemoryError) -> str:
+    """One line with the size that could not be had (numpy says it) and what to change."""
+    detail = " ".join(str(exc).split())
+    return (
+        f"out of memory{f' ({detail})' if detail else ''}: plan fewer targets at a time, "
+        "lower --samples, or use a smaller DEM"
+    )
+
+
+def _shorten(name: str, limit: int = 120) -> str:
+    return name if len(name) <= limit else f"{name[: limit // 2]}...{name[-limit // 2 :]}"
+
+
+class RootGroup(click.Group):
+    """The ``urpt-gcs`` group: turns what escapes a command into one line and an exit status."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            interrupted()
+        except UrptError as exc:
+            fail(exc)
+        except MemoryError as exc:
+            click.echo(f"urpt-gcs: error: {memory_error_message(exc)}", err=True)
+            sys.exit(1)
+        except OSError as exc:
+            if exc.errno == errno.EPIPE:
+                raise  # click quiets a closed pipe (``urpt-gcs ... | head``) itself
+            click.echo(f"urpt-gcs: error: {os_error_message(exc)}", err=True)
+            sys.exit(1)
 
 
 def upload_and_report(
@@ -64,7 +136,7 @@ def parse_home(text: str | None) -> tuple[float, float] | None:
     return lat, lon
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=RootGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="urpt-gcs")
 def main() -> None:
     """Plan, check and upload drone missions that photograph every target on real terrain."""

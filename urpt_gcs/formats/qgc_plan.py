@@ -25,6 +25,9 @@ from urpt_gcs.mission import (
     GeoPoint,
     Mission,
     MissionItem,
+    command_name,
+    count_problem,
+    item_problem,
 )
 
 PLAN_FILE_VERSION = 1
@@ -185,7 +188,12 @@ def read_plan(text: str, source: str) -> Mission:
     raw_items = mission.get("items")
     if not isinstance(raw_items, list):
         raise MissionFileError(f"{source}: mission.items is missing or not a list: {_SAVE_AS_PLAN}")
-    items = tuple(_read_item(raw, index, source) for index, raw in enumerate(raw_items))
+    too_many = count_problem(len(raw_items), firmware)
+    if too_many is not None:
+        raise MissionFileError(f"{source}: {too_many}")
+    items = tuple(
+        _read_item(raw, index, source, home, firmware) for index, raw in enumerate(raw_items)
+    )
     return assemble_mission(
         source,
         home=home,
@@ -229,7 +237,9 @@ def _speed(mission: dict[str, Any], key: str, source: str) -> float:
     )
 
 
-def _read_item(raw: object, index: int, source: str) -> MissionItem:
+def _read_item(
+    raw: object, index: int, source: str, home: GeoPoint, firmware: Firmware
+) -> MissionItem:
     where = f"{source}: mission item at index {index}"
     if not isinstance(raw, dict):
         raise MissionFileError(f"{where} is not a JSON object: {_SAVE_AS_PLAN}")
@@ -261,13 +271,15 @@ def _read_item(raw: object, index: int, source: str) -> MissionItem:
         raise MissionFileError(
             f"{where}: autoContinue {show(autocontinue)} is not true or false: {_FIX_ITEM}"
         )
-    return make_item(
+    item = make_item(
         where,
         command=command,
         frame=frame,
         params=[math.nan if p is None else p for p in params],
         autocontinue=autocontinue,
     )
+    check_item(where, item, home, firmware)
+    return item
 
 
 def _is_int(value: object) -> TypeGuard[int]:
@@ -323,6 +335,13 @@ def make_item(
             f"{where}: params 5-7 (x, y, z) must be numbers, not null or NaN: give that item "
             f"a position and altitude"
         ) from None
+
+
+def check_item(where: str, item: MissionItem, home: GeoPoint, firmware: Firmware) -> None:
+    """Refuse an item no vehicle should be given (see :func:`urpt_gcs.mission.item_problem`)."""
+    problem = item_problem(item, home, firmware)
+    if problem is not None:
+        raise MissionFileError(f"{where} ({command_name(item.command)}): {problem}")
 
 
 def assemble_mission(

@@ -18,8 +18,16 @@ import re
 from decimal import Decimal
 
 from urpt_gcs.errors import MissionFileError, SettingsError
-from urpt_gcs.formats.qgc_plan import assemble_mission, make_item, show
-from urpt_gcs.mission import FIRMWARES, Firmware, GeoPoint, Mission, MissionItem, MissionSettings
+from urpt_gcs.formats.qgc_plan import assemble_mission, check_item, make_item, show
+from urpt_gcs.mission import (
+    FIRMWARES,
+    Firmware,
+    GeoPoint,
+    Mission,
+    MissionItem,
+    MissionSettings,
+    count_problem,
+)
 
 HEADER = "QGC WPL 110"
 FIELD_COUNT = 12
@@ -103,15 +111,17 @@ def read_waypoints(text: str, source: str, firmware: Firmware = "ardupilot") -> 
     Returns
     -------
     Mission
-        Home from line 0 (its x, y, z), the items from the lines after it (their seq and
-        current fields are ignored, as Mission Planner does), the flight altitude from the first
-        takeoff relative to home (else the highest relative altitude). The format carries no
+        Home from the line of seq 0 (its x, y, z), the items from the lines after it (seq
+        1, 2, ... in order; their ``current`` flags are not kept), the flight altitude from the
+        first takeoff relative to home (else the highest relative altitude). The format carries no
         speeds: they are :class:`MissionSettings` defaults.
 
     Raises
     ------
     MissionFileError
-        If the text is not a file urpt-gcs can use; the message names the line and the fix.
+        If the text is not a file urpt-gcs can use, or an item holds a value no vehicle
+        should be given (:func:`~urpt_gcs.mission.item_problem`); the message names the line
+        and the fix.
     """
     if firmware not in FIRMWARES:
         raise SettingsError(f"firmware {firmware!r} is not one of {', '.join(FIRMWARES)}")
@@ -129,8 +139,11 @@ def read_waypoints(text: str, source: str, firmware: Firmware = "ardupilot") -> 
             rows.append((number, stripped.split()))
     if not rows:
         raise MissionFileError(f"{source}: no home line after the header: {_SAVE_AS_WAYPOINTS}")
+    too_many = count_problem(len(rows) - 1, firmware)
+    if too_many is not None:
+        raise MissionFileError(f"{source}: {too_many}")
     home_line, home_fields = rows[0]
-    home_item = _read_item(home_line, home_fields, source)
+    home_item = _read_item(home_line, home_fields, source, seq=0)
     try:
         home = GeoPoint(home_item.params[4], home_item.params[5], home_item.params[6])
     except SettingsError as exc:
@@ -139,17 +152,22 @@ def read_waypoints(text: str, source: str, firmware: Firmware = "ardupilot") -> 
             f"in Mission Planner and save again"
         ) from None
     defaults = MissionSettings()
+    items: list[MissionItem] = []
+    for seq, (number, fields) in enumerate(rows[1:], start=1):
+        item = _read_item(number, fields, source, seq)
+        check_item(f"{source}: line {number}", item, home, firmware)
+        items.append(item)
     return assemble_mission(
         source,
         home=home,
-        items=tuple(_read_item(number, fields, source) for number, fields in rows[1:]),
+        items=tuple(items),
         firmware=firmware,
         cruise_speed_m_s=defaults.cruise_speed_m_s,
         hover_speed_m_s=defaults.hover_speed_m_s,
     )
 
 
-def _read_item(number: int, fields: list[str], source: str) -> MissionItem:
+def _read_item(number: int, fields: list[str], source: str, seq: int) -> MissionItem:
     where = f"{source}: line {number}"
     if len(fields) != FIELD_COUNT:
         raise MissionFileError(
@@ -163,6 +181,14 @@ def _read_item(number: int, fields: list[str], source: str) -> MissionItem:
                 f"{_FIX_LINE}"
             )
     frame, command, autocontinue = int(fields[2]), int(fields[3]), int(fields[11])
+    # The vehicle numbers items by position: a line repeated or lost must not shift the rest.
+    if int(fields[0]) != seq:
+        raise MissionFileError(
+            f"{where}: seq {int(fields[0])}, expected {seq}: seq must count 0 (home), 1, 2, ... "
+            f"one line per item, so a line is repeated or missing: {_FIX_LINE}"
+        )
+    if int(fields[1]) not in (0, 1):
+        raise MissionFileError(f"{where}: current {int(fields[1])} is not 0 or 1: {_FIX_LINE}")
     if not 0 <= frame <= 255:
         raise MissionFileError(f"{where}: frame {frame} is not a MAV_FRAME number: {_FIX_LINE}")
     if not 0 <= command <= 65535:

@@ -76,6 +76,8 @@ class VehicleSettings:
             raise SettingsError(f"--capacity {self.capacity} is out of range; use 2 to 65535")
         if not (math.isfinite(self.boot_s) and 0.0 <= self.boot_s <= 600.0):
             raise SettingsError(f"--boot {self.boot_s} s is out of range; use 0 to 600 s")
+        if not 0 <= self.seed <= 2**32 - 1:
+            raise SettingsError(f"--seed {self.seed} is out of range; use 0 to {2**32 - 1}")
         if not 1 <= self.system_id <= 250:
             raise SettingsError(f"system id {self.system_id} is out of range; use 1 to 250")
 

@@ -15,6 +15,7 @@ from urpt_gcs.visibility import BoolArray
 
 # Tekdas et al.: a tour through k disjoint discs of radius r is at least k/2 * alpha * r (k >= 3).
 DISC_PACKING_ALPHA = 0.4786
+SEED_MAX = 2**32 - 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,6 +30,9 @@ class SolveSettings:
             raise SettingsError(
                 f"--time-limit {self.time_limit_s} must be a positive number of seconds"
             )
+        # numpy's generators take only non-negative seeds; 32 bits is what every one accepts.
+        if not 0 <= self.seed <= SEED_MAX:
+            raise SettingsError(f"--seed {self.seed} is out of range; use 0 to {SEED_MAX}")
 
 
 @dataclass(frozen=True, slots=True)
