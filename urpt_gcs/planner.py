@@ -251,6 +251,57 @@ def _require_window(
     )
 
 
+@dataclass(frozen=True, slots=True)
+class _Site:
+    """The targets and home, placed in the planning CRS."""
+
+    targets: TargetSet
+    dem: DemInfo
+    crs: pyproj.CRS
+    names: list[str]
+    targets_xy: FloatArray
+    home_lat_lon: tuple[float, float]
+    home_xy: tuple[float, float]
+    home_source: str
+
+
+@dataclass(frozen=True, slots=True)
+class _Area:
+    """The DEM window planned on, the ground under the points and the flight plane."""
+
+    terrain: Terrain
+    ground_m: FloatArray
+    home_ground_m: float
+    terrain_max_m: float
+    camera: Camera
+
+
+@dataclass(frozen=True, slots=True)
+class _Flight:
+    """The tour cut into sorties and written as missions, checked as written."""
+
+    stop_names: list[str]
+    sorties: tuple[Sortie, ...]
+    missions: tuple[Mission, ...]
+    legs: tuple[Leg, ...]
+    geofence_latlon: tuple[tuple[float, float], ...]
+    warnings: list[str]
+
+
+class _Stages:
+    """Announces each stage and keeps how long it took."""
+
+    def __init__(self, progress: Progress | None) -> None:
+        self.say = progress or (lambda _msg: None)
+        self.timings_s: dict[str, float] = {}
+        self._clock = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.timings_s[name] = now - self._clock
+        self._clock = now
+
+
 def plan(
     dem_path: Path,
     targets_path: Path,
@@ -276,18 +327,66 @@ def plan(
         The checked tour, its mission and everything computed on the way.
     """
     settings = settings or PlanSettings()
-    say = progress or (lambda _msg: None)
-    timings: dict[str, float] = {}
-    warnings: list[str] = []
-    clock = time.perf_counter()
+    stages = _Stages(progress)
+    stages.say("reading targets")
+    site = _read_site(dem_path, targets_path, settings)
+    stages.lap("targets")
+    stages.say("reading terrain")
+    area = _read_area(site, settings)
+    stages.lap("terrain")
+    stages.say(f"visibility of {len(site.names)} targets")
+    regions = visibility_regions(
+        area.terrain, site.targets_xy, area.ground_m, area.camera, settings.samples
+    )
+    stages.lap("visibility")
+    stages.say("checking viewpoints")
+    instance = build_instance(
+        area.terrain,
+        regions,
+        site.targets_xy,
+        area.ground_m,
+        area.camera,
+        site.home_xy,
+        area.terrain_max_m,
+    )
+    stages.lap("viewpoints")
+    solver = choose(instance, settings.solver)
+    stages.say(f"preparing the {solver} solver (compiled on first use)")
+    prepare(solver)
+    stages.lap("compile")
+    stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
+    tour = solve(instance, solver, settings.solve)
+    stages.lap("solve")
+    flight = _fly(site, area, tour, settings)
+    stages.lap("checks")
+    return Plan(
+        settings=settings,
+        dem=site.dem,
+        terrain=area.terrain,
+        targets=site.targets,
+        crs=site.crs,
+        targets_xy=site.targets_xy,
+        ground_m=area.ground_m,
+        home_xy=site.home_xy,
+        home_ground_m=area.home_ground_m,
+        home_source=site.home_source,
+        camera=area.camera,
+        terrain_max_m=area.terrain_max_m,
+        regions=regions,
+        instance=instance,
+        tour=tour,
+        legs=flight.legs,
+        sorties=flight.sorties,
+        missions=flight.missions,
+        geofence_latlon=flight.geofence_latlon,
+        flight_time_s=sum(s.flight_time_s for s in flight.sorties),
+        timings_s=stages.timings_s,
+        warnings=tuple(flight.warnings),
+    )
 
-    def lap(name: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[name] = now - clock
-        clock = now
 
-    say("reading targets")
+def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _Site:
+    """Read the targets and the DEM's description; place them in the planning CRS."""
     targets = read_targets(targets_path)
     # Every target is a viewpoint (its nadir), so this refuses, before any work, a target
     # count whose distance matrix could not fit even without the boundary viewpoints.
@@ -299,32 +398,43 @@ def plan(
     )
     info = open_dem(dem_path, settings.band)
     home_lat, home_lon, home_source = _pick_home(targets, settings)
-    names = [t.name for t in targets.targets]
     lat_lon = [(t.lat_deg, t.lon_deg) for t in targets.targets]
     lats = [p[0] for p in lat_lon] + [home_lat]
     lons = [p[1] for p in lat_lon] + [home_lon]
     crs = planning_crs(info, (min(lons), min(lats), max(lons), max(lats)))
-    to_xy = pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
-    tx, ty = to_xy.transform([p[1] for p in lat_lon], [p[0] for p in lat_lon])
-    targets_xy = np.column_stack([np.atleast_1d(tx), np.atleast_1d(ty)]).astype(np.float64)
-    hx, hy = to_xy.transform(home_lon, home_lat)
-    home_xy = (float(hx), float(hy))
-    points_xy = np.vstack([targets_xy, np.array([home_xy])])
-    lap("targets")
+    home_xy = _xy(crs, [(home_lat, home_lon)])[0]
+    return _Site(
+        targets=targets,
+        dem=info,
+        crs=crs,
+        names=[t.name for t in targets.targets],
+        targets_xy=_xy(crs, lat_lon),
+        home_lat_lon=(home_lat, home_lon),
+        home_xy=(float(home_xy[0]), float(home_xy[1])),
+        home_source=home_source,
+    )
 
-    say("reading terrain")
+
+def _read_area(site: _Site, settings: PlanSettings) -> _Area:
+    """Read the DEM window the camera cones need and fix the flight plane.
+
+    Without ``--altitude`` the plane sits ``--clearance`` above the highest terrain read, and
+    a higher plane widens the cones, which may need a larger window: repeat until the window
+    holds them.
+    """
+    info, crs = site.dem, site.crs
+    points_xy = np.vstack([site.targets_xy, np.array([site.home_xy])])
     tan = math.tan(math.radians(settings.fov_deg))
     area = _bbox(points_xy, 0.0)
-    terrain = read_terrain(info, crs, _bbox(points_xy, 0.0))
+    terrain = read_terrain(info, crs, area)
     margin = _WINDOW_MARGIN_CELLS * terrain.cell_m
-    all_ground = _check_ground(
+    ground = _check_ground(
         info,
         terrain,
-        [*(f"target '{n}'" for n in names), f"home ({home_source})"],
-        [*lat_lon, (home_lat, home_lon)],
+        [*(f"target '{n}'" for n in site.names), f"home ({site.home_source})"],
+        [*((t.lat_deg, t.lon_deg) for t in site.targets.targets), site.home_lat_lon],
         points_xy,
-    )
-    ground, home_ground = all_ground[:-1], float(all_ground[-1])
+    )[:-1]
     for _ in range(12):
         top = float(np.nanmax(terrain.elevation_m))
         altitude = (
@@ -341,13 +451,11 @@ def plan(
     # slightly from one window to the next, and every line of sight ends on the target.
     all_ground = terrain.sample(points_xy[:, 0], points_xy[:, 1])
     ground, home_ground = all_ground[:-1], float(all_ground[-1])
-    lap("terrain")
-
     low = np.flatnonzero(ground >= altitude)
     if low.size:
         i = int(low[0])
         raise SettingsError(
-            f"--altitude {altitude:g} m is at or below the terrain at target '{names[i]}' "
+            f"--altitude {altitude:g} m is at or below the terrain at target '{site.names[i]}' "
             f"({ground[i]:.1f} m): raise it above {float(ground.max()):.1f} m or use --clearance"
         )
     if home_ground >= altitude:
@@ -356,59 +464,43 @@ def plan(
             "raise it or use --clearance"
         )
     camera = Camera(altitude_m=altitude, fov_deg=settings.fov_deg)
-    _check_cone_width(camera, ground, names)
+    _check_cone_width(camera, ground, site.names)
+    return _Area(terrain, ground, home_ground, top, camera)
 
-    say(f"visibility of {len(names)} targets")
-    regions = visibility_regions(terrain, targets_xy, ground, camera, settings.samples)
-    lap("visibility")
-    say("checking viewpoints")
-    instance = build_instance(terrain, regions, targets_xy, ground, camera, home_xy, top)
-    lap("viewpoints")
-    solver = choose(instance, settings.solver)
-    say(f"preparing the {solver} solver (compiled on first use)")
-    prepare(solver)
-    lap("compile")
-    say(f"solving ({instance.n_viewpoints} viewpoints)")
-    tour = solve(instance, solver, settings.solve)
-    lap("solve")
 
+def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Flight:
+    """Cut the tour into sorties, write their missions and check them before anyone flies."""
     if tour.points_xy is None:
         raise PlanError(f"internal check failed: solver {tour.solver} returned no positions")
+    names = site.names
     # Centimetre altitudes, rounded up: a higher eye only widens the cone and lifts every
     # line of sight, so nothing checked above is lost.
-    altitude_rel = math.ceil((altitude - home_ground) * 100.0) / 100.0
+    altitude_rel = math.ceil((area.camera.altitude_m - area.home_ground_m) * 100.0) / 100.0
     stop_names = [
         f"stop {k} ({_stop_name(row, names)})" for k, row in enumerate(tour.sees, start=1)
     ]
-    model = flight_model(settings)
     endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
-    sorties = split_sorties(tour.points_xy, home_xy, altitude_rel, model, endurance, stop_names)
+    sorties = split_sorties(
+        tour.points_xy, site.home_xy, altitude_rel, flight_model(settings), endurance, stop_names
+    )
     # Home written a little low (whole centimetres, down): every check of the mission as
     # written then measures from a height the vehicle is at or above.
-    home = GeoPoint(home_lat, home_lon, math.floor(home_ground * 100.0) / 100.0)
-    stops_latlon = _latlon(crs, tour.points_xy)
+    home = GeoPoint(*site.home_lat_lon, math.floor(area.home_ground_m * 100.0) / 100.0)
+    stops_latlon = _latlon(site.crs, tour.points_xy)
     missions = tuple(
         build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
         for s in sorties
     )
-    lap("mission")
-
-    legs = _check_as_written(
-        terrain,
-        crs,
-        missions,
-        sorties,
-        tour.sees,
-        targets_xy,
-        ground,
-        camera,
-        names,
-        stop_names,
-    )
-    warnings += check_legs(legs, settings.min_clearance_m)
-    stop_ground = terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
+    legs = _check_as_written(site, area, missions, sorties, tour.sees, stop_names)
+    warnings = check_legs(legs, settings.min_clearance_m)
+    stop_ground = area.terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
     warnings += check_height_above_ground(
-        altitude, stop_ground, stop_names, home_ground, settings.max_agl_m, settings.strict
+        area.camera.altitude_m,
+        stop_ground,
+        stop_names,
+        area.home_ground_m,
+        settings.max_agl_m,
+        settings.strict,
     )
     if len(sorties) > 1:
         warnings.append(
@@ -416,33 +508,10 @@ def plan(
             f"{settings.endurance_min:g} min; each returns home"
         )
     fence_xy = geofence_polygon(
-        np.vstack([[home_xy], tour.points_xy, targets_xy]), settings.geofence_margin_m
+        np.vstack([[site.home_xy], tour.points_xy, site.targets_xy]), settings.geofence_margin_m
     )
-    fence = tuple(_latlon(crs, fence_xy))
-    lap("checks")
-    return Plan(
-        settings=settings,
-        dem=info,
-        terrain=terrain,
-        targets=targets,
-        crs=crs,
-        targets_xy=targets_xy,
-        ground_m=ground,
-        home_xy=home_xy,
-        home_ground_m=home_ground,
-        home_source=home_source,
-        camera=camera,
-        terrain_max_m=top,
-        regions=regions,
-        instance=instance,
-        tour=tour,
-        legs=legs,
-        sorties=sorties,
-        missions=missions,
-        geofence_latlon=fence,
-        flight_time_s=sum(s.flight_time_s for s in sorties),
-        timings_s=timings,
-        warnings=tuple(warnings),
+    return _Flight(
+        stop_names, sorties, missions, legs, tuple(_latlon(site.crs, fence_xy)), warnings
     )
 
 
@@ -462,15 +531,11 @@ def _check_cone_width(camera: Camera, ground_m: FloatArray, names: list[str]) ->
 
 
 def _check_as_written(
-    terrain: Terrain,
-    crs: pyproj.CRS,
+    site: _Site,
+    area: _Area,
     missions: tuple[Mission, ...],
     sorties: tuple[Sortie, ...],
     sees: BoolArray,
-    targets_xy: FloatArray,
-    ground_m: FloatArray,
-    camera: Camera,
-    names: list[str],
     stop_names: list[str],
 ) -> tuple[Leg, ...]:
     """Check the missions as the vehicle will store them, and return their legs.
@@ -480,26 +545,26 @@ def _check_as_written(
     sees, and the legs' clearance is measured between those positions.
     """
     eye_m = missions[0].home.amsl_m + missions[0].altitude_rel_m
-    written_camera = Camera(altitude_m=eye_m, fov_deg=camera.fov_deg)
+    written_camera = Camera(altitude_m=eye_m, fov_deg=area.camera.fov_deg)
     legs: tuple[Leg, ...] = ()
     stops = []
     for sortie, mission in zip(sorties, missions, strict=True):
-        home_xy = _xy(crs, [(mission.home.lat_deg, mission.home.lon_deg)])
-        at = _xy(crs, waypoint_positions(mission))
+        home_xy = _xy(site.crs, [(mission.home.lat_deg, mission.home.lon_deg)])
+        at = _xy(site.crs, waypoint_positions(mission))
         stops.append(at)
         path = np.vstack([home_xy, at, home_xy])
         legs += leg_clearances(
-            terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], eye_m
+            area.terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], eye_m
         )
     written = np.vstack(stops)
-    seen = cover_sets(terrain, written, targets_xy, ground_m, written_camera)
+    seen = cover_sets(area.terrain, written, site.targets_xy, area.ground_m, written_camera)
     lost = np.argwhere(sees & ~seen)
     if lost.size:
         k, t = (int(v) for v in lost[0])
         raise PlanError(
-            f"{stop_names[k]} no longer sees target '{names[t]}' once its position is written "
-            "to the mission's 1e-7 degree grid: it sits on the edge of what the camera sees; "
-            "widen --fov, raise --samples or change --altitude"
+            f"{stop_names[k]} no longer sees target '{site.names[t]}' once its position is "
+            "written to the mission's 1e-7 degree grid: it sits on the edge of what the camera "
+            "sees; widen --fov, raise --samples or change --altitude"
         )
     return legs
 
