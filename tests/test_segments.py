@@ -76,8 +76,10 @@ def _tolerance(terrain: Terrain, a: np.ndarray, b: np.ndarray) -> float:
 def _point(terrain: Terrain, draw: st.DrawFn, height: float) -> np.ndarray:
     rows, cols = terrain.elevation_m.shape
     cell = terrain.cell_m
-    x = 500_000.0 + draw(st.floats(-1.0, cols + 1.0)) * cell
-    y = 5_200_000.0 - draw(st.floats(-1.0, rows + 1.0)) * cell
+    # On a micro-cell grid: exact pixel edges and centre lines stay reachable, but not points
+    # a rounding error away from them, where the two computations may fall either side.
+    x = 500_000.0 + round(draw(st.floats(-1.0, cols + 1.0)), 6) * cell
+    y = 5_200_000.0 - round(draw(st.floats(-1.0, rows + 1.0)), 6) * cell
     return np.array([x, y, height])
 
 
@@ -166,3 +168,16 @@ def test_vertical_segment_and_non_finite_ends() -> None:
     assert math.isclose(float(profile.excess_m[0]), 0.0, abs_tol=1e-12)
     assert float(profile.unknown_fraction[1]) == 1.0
     assert clear_of_terrain(terrain, a, b).tolist() == [True, False]
+
+
+def test_a_known_point_beside_nodata_counts() -> None:
+    """The segment ends on a line of pixel centres next to a nodata row: the cell it ends in
+    touches nodata, but the surface at the end uses only the known centres of that line."""
+    z = np.array([[np.nan, 99.5, 98.5, 99.1, 102.0], [100.06, 208.9, 154.8, 97.0, 100.8]])
+    terrain = _terrain(z)
+    a = np.array([500_020.0, 5_200_000.0, 90.0])
+    b = np.array([500_000.0, 5_199_985.0, 90.0])
+    profile = segment_profile(terrain, a[None], b[None])
+    assert math.isclose(float(profile.excess_m[0]), 10.06, abs_tol=1e-9)
+    assert math.isclose(float(profile.at[0]), 1.0)
+    assert math.isclose(float(profile.unknown_fraction[0]), 0.75, abs_tol=1e-9)

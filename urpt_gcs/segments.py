@@ -58,6 +58,27 @@ def _corner(z, row, col):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def _point_value(z, c, r):  # type: ignore[no-untyped-def]
+    """The surface at one point of the padded grid; NaN when a corner that carries weight
+    there is nodata."""
+    rows, cols = z.shape
+    i = min(max(math.floor(c), 0), cols)
+    j = min(max(math.floor(r), 0), rows)
+    u = c - i
+    v = r - j
+    total = 0.0
+    for dj in range(2):
+        for di in range(2):
+            w = (u if di else 1.0 - u) * (v if dj else 1.0 - v)
+            if w > 0.0:
+                value = _corner(z, j + dj, i + di)
+                if math.isnan(value):
+                    return np.nan
+                total += w * value
+    return total
+
+
+@njit(cache=True)
 def _clip(p0, d, lo, hi, t0, t1):  # type: ignore[no-untyped-def]
     """Liang–Barsky clip of ``p0 + t d`` to ``[lo, hi]``, narrowing ``[t0, t1]``."""
     if d == 0.0:
@@ -166,6 +187,15 @@ def _profile_kernel(z, c0, r0, h0, c1, r1, h1, excess, at, unknown):  # type: ig
                 if not known:
                     # A segment with no horizontal extent is wholly over this cell.
                     lost += t_next - t_prev if (dc != 0.0 or dr != 0.0) else 1.0
+                    # The piece's ends may still be known ground: on a line of centres the
+                    # corners across it carry no weight.
+                    for t in (t_prev, t_next):
+                        surface = _point_value(z, c0[k] + dc * t, r0[k] + dr * t)
+                        if not math.isnan(surface):
+                            f = surface - (h0[k] + dh * t)
+                            if f > best:
+                                best = f
+                                best_t = t
                 else:
                     a1 = z10 - z00
                     a2 = z01 - z00
