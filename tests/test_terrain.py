@@ -9,7 +9,7 @@ import numpy as np
 import pyproj
 import pytest
 import rasterio
-from conftest import DEMO, REAL_DEMS, WriteDem
+from conftest import DEMO, REAL_DEMS, WriteDem, needs_shared
 from rasterio.transform import from_origin
 from rasterio.windows import Window
 
@@ -107,6 +107,7 @@ def test_undeclared_fill_values_are_masked(write_dem: WriteDem) -> None:
     assert np.nanmax(terrain.elevation_m) == 50.0
 
 
+@needs_shared(REAL_DEMS)
 def test_compound_crs_without_epsg_plans_in_its_horizontal_part() -> None:
     info = open_dem(REAL_DEMS / "codem_aoi_dsm_utm16n_egm2008.tif")
     assert info.crs.to_epsg() is None and info.crs.is_compound
@@ -114,6 +115,7 @@ def test_compound_crs_without_epsg_plans_in_its_horizontal_part() -> None:
     assert info.horizontal_crs.to_epsg() == 32616
 
 
+@needs_shared(REAL_DEMS)
 @pytest.mark.parametrize("name", ["pysheds_dem_wgs84.tif", "dsm2dtm_drone_dsm_wgs84.tif"])
 def test_geographic_dem_is_georeferenced_in_utm_without_resampling(name: str) -> None:
     path = REAL_DEMS / name
