@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -422,3 +423,20 @@ def test_valid_range_applies_to_metres_not_to_stored_feet(write_dem: WriteDem) -
     )
     with pytest.raises(DemError, match=r"-1219\.2 to -1219\.2 m, converted from foot"):
         check_elevations(open_dem(path))
+
+
+@pytest.mark.parametrize(
+    ("name", "words"),
+    [
+        ("dem_not_georeferenced.tif", "no coordinate reference system"),
+        ("dem_without_geotransform.tif", "no geotransform"),
+    ],
+)
+def test_a_raster_without_georeferencing_is_refused_without_a_warning(
+    name: str, words: str
+) -> None:
+    path = Path(__file__).resolve().parent / "data" / "bad" / name
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DemError, match=words):
+            open_dem(path)
