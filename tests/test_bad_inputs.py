@@ -244,6 +244,26 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--dem", str(BAD / "dem_without_geotransform.tif")],
         ["dem_without_geotransform.tif", "no geotransform", "export it georeferenced"],
     ),
+    "csv_lat_lon_swapped": (
+        ["--targets", str(BAD / "csv_lat_lon_swapped.csv")],
+        ["csv_lat_lon_swapped.csv", "North gate", "did you swap lat and lon?", "Swap the lat"],
+    ),
+    "csv_one_row_swapped": (
+        ["--targets", str(BAD / "csv_one_row_swapped.csv")],
+        ["csv_one_row_swapped.csv", "'Hilltop'", "outside DEM", "did you swap lat and lon?"],
+    ),
+    "csv_lat_over_90_swapped": (
+        ["--targets", str(BAD / "csv_lat_over_90_swapped.csv")],
+        ["csv_lat_over_90_swapped.csv", "[-90, 90]", "did you swap lat and lon?"],
+    ),
+    "home_lat_lon_swapped": (
+        ["@home_lat_lon_swapped.args"],
+        ["--home 9.4230907,47.6887616", "did you swap lat and lon?", "--home 47.6887616,9.4230907"],
+    ),
+    "home_lat_over_90_swapped": (
+        ["@home_lat_over_90_swapped.args"],
+        ["--home 100.5018,13.7563", "did you swap lat and lon?", "--home 13.7563,100.5018"],
+    ),
 }
 
 

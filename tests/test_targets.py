@@ -355,3 +355,33 @@ def test_duplicates_among_many_targets_are_found_across_grid_cells(tmp_path: Pat
 def test_points_just_over_the_tolerance_apart_are_distinct(tmp_path: Path) -> None:
     rows = [("A", 47.0, 8.0), ("B", 47.0 + 1.5e-7, 8.0), ("C", 47.0, 8.0 - 1.5e-7)]
     assert len(read_targets(_csv(tmp_path / "close.csv", rows)).targets) == 3
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "fix"),
+    [
+        (
+            "swapped.kml",
+            '<kml xmlns="http://www.opengis.net/kml/2.2"><Placemark><name>Temple</name>'
+            "<Point><coordinates>13.7563,100.5018</coordinates></Point></Placemark></kml>",
+            "KML writes lon,lat",
+        ),
+        (
+            "swapped.geojson",
+            '{"type": "Point", "coordinates": [13.7563, 100.5018]}',
+            "GeoJSON writes [lon, lat]",
+        ),
+    ],
+)
+def test_a_swapped_point_off_the_globe_gets_a_hint_in_the_files_own_order(
+    tmp_path: Path, name: str, text: str, fix: str
+) -> None:
+    path = tmp_path / name
+    path.write_text(text)
+    message = _assert_error(path, "outside [-90, 90]: did you swap lat and lon?")
+    assert fix in message
+
+
+def test_a_typo_among_good_points_gets_no_swap_hint() -> None:
+    message = _assert_error(BAD / "csv_lat_out_of_range.csv", "latitude 95.0")
+    assert "swap" not in message

@@ -300,6 +300,18 @@ def _csv_number(source: str, where: str, column: str, text: str, delimiter: str)
         raise _error(source, problem, "fix the value (decimal degrees, e.g. 47.3971)") from None
 
 
+# A point with lat and lon swapped is taken to belong with the file's others this close to one.
+_SWAP_NEAR_DEG = 1.0
+_KML_ORDER = "KML writes lon,lat: swap the two numbers"
+_GEOJSON_ORDER = "GeoJSON writes [lon, lat]: swap the two numbers"
+SWAP_FIX = {
+    ".kml": _KML_ORDER,
+    ".kmz": _KML_ORDER,
+    ".geojson": _GEOJSON_ORDER,
+    ".json": _GEOJSON_ORDER,
+    ".csv": "swap the lat and lon values (or the column names)",
+}
+
 _READERS: dict[str, Callable[[str, bytes], list[_Point]]] = {
     ".kml": _kml_points,
     ".kmz": _kmz_points,
@@ -309,14 +321,40 @@ _READERS: dict[str, Callable[[str, bytes], list[_Point]]] = {
 }
 
 
-def _check(source: str, points: list[_Point]) -> TargetSet:
+def _on_globe(lat: float, lon: float) -> bool:
+    return math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180
+
+
+def _looks_swapped(p: _Point, points: list[_Point]) -> bool:
+    """Whether ``p``, off the globe, lands among the file's other points with lat and lon swapped.
+
+    Either the whole file is swapped (p swapped lies near the others swapped) or this one point
+    is (p swapped lies near the others as given); a lone point only has to land on the globe.
+    A typo (a latitude of 95 among points at 47 N) lands near neither, and gets no hint.
+    """
+    if not _on_globe(p.lon_deg, p.lat_deg):
+        return False
+    others = [q for q in points if q is not p]
+    if not others:
+        return True
+    return any(
+        abs(p.lon_deg - a) <= _SWAP_NEAR_DEG and abs(p.lat_deg - b) <= _SWAP_NEAR_DEG
+        for q in others
+        for a, b in ((q.lat_deg, q.lon_deg), (q.lon_deg, q.lat_deg))
+    )
+
+
+def _check(source: str, points: list[_Point], swap_fix: str) -> TargetSet:
     """Validate raw points and sort them into home and targets."""
     for p in points:
         for axis, value, bound in (("latitude", p.lat_deg, 90), ("longitude", p.lon_deg, 180)):
             if not (math.isfinite(value) and -bound <= value <= bound):
                 why = f"outside [-{bound}, {bound}]" if math.isfinite(value) else "not finite"
                 problem = f"has {p.label()} with {axis} {value}, {why}"
-                raise _error(source, problem, "fix the coordinates (decimal degrees, WGS84)")
+                fix = "fix the coordinates (decimal degrees, WGS84)"
+                if _looks_swapped(p, points):
+                    fix = f"did you swap lat and lon? {swap_fix[0].upper()}{swap_fix[1:]}"
+                raise _error(source, problem, fix)
     homes = [p for p in points if p.is_home]
     if len(homes) > 1:
         problem = f"names two homes, {homes[0].label()} and {homes[1].label()}"
@@ -404,4 +442,4 @@ def read_targets(path: Path) -> TargetSet:
     )
     if not data.strip():
         raise _error(source, "is empty", "export the targets again")
-    return _check(source, reader(source, data))
+    return _check(source, reader(source, data), SWAP_FIX[path.suffix.lower()])
