@@ -264,6 +264,14 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["@home_lat_over_90_swapped.args"],
         ["--home 100.5018,13.7563", "did you swap lat and lon?", "--home 13.7563,100.5018"],
     ),
+    "geojson_crs_unknown": (
+        ["--targets", str(BAD / "geojson_crs_unknown.geojson")],
+        ["geojson_crs_unknown.geojson", "'EPSG:999999' that is not known", "in WGS84"],
+    ),
+    "geojson_crs_link": (
+        ["--targets", str(BAD / "geojson_crs_link.geojson")],
+        ["geojson_crs_link.geojson", "does not name a CRS", "in WGS84"],
+    ),
 }
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 import zipfile
 from pathlib import Path
@@ -385,3 +386,32 @@ def test_a_swapped_point_off_the_globe_gets_a_hint_in_the_files_own_order(
 def test_a_typo_among_good_points_gets_no_swap_hint() -> None:
     message = _assert_error(BAD / "csv_lat_out_of_range.csv", "latitude 95.0")
     assert "swap" not in message
+
+
+def test_geojson_with_a_projected_crs_member_is_read_in_that_crs() -> None:
+    # QGIS writes the GeoJSON 2008 `crs` member; these are three demo points in UTM 32N.
+    result = read_targets(TARGETS / "points_utm32n.geojson")
+    expected = {"North gate": (47.69168576, 9.42311436), "Hilltop": (47.691422212, 9.421379797)}
+    assert _names(result) == list(expected)
+    for target in result.targets:
+        assert (target.lat_deg, target.lon_deg) == pytest.approx(expected[target.name], abs=1e-8)
+    assert result.home is not None
+    assert (result.home.lat_deg, result.home.lon_deg) == pytest.approx(
+        (47.688761595, 9.423090709), abs=1e-8
+    )
+
+
+@pytest.mark.parametrize("name", ["urn:ogc:def:crs:OGC:1.3:CRS84", "EPSG:4326"])
+def test_geojson_with_a_wgs84_crs_member_is_read_as_lon_lat(tmp_path: Path, name: str) -> None:
+    path = tmp_path / "wgs84.geojson"
+    crs = {"type": "name", "properties": {"name": name}}
+    path.write_text(json.dumps({"type": "Point", "coordinates": [8.5412, 47.3781], "crs": crs}))
+    (target,) = read_targets(path).targets
+    assert (target.lat_deg, target.lon_deg) == (47.3781, 8.5412)
+
+
+def test_geojson_point_outside_its_crs_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "far.geojson"
+    crs = {"type": "name", "properties": {"name": "EPSG:32632"}}
+    path.write_text(json.dumps({"type": "Point", "coordinates": [5e8, 5e9], "crs": crs}))
+    _assert_error(path, "outside WGS 84 / UTM zone 32N")
