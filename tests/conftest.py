@@ -1,4 +1,17 @@
-"""Shared fixtures: synthetic GeoTIFFs and paths to the real rasters beside the checkout."""
+"""Shared fixtures: synthetic GeoTIFFs and paths to the real data beside the checkout.
+
+Data too large or too foreign to commit (the real rasters, the GTSPLIB and CETSP benches, the
+SITL builds) lives in ``../shared`` beside the checkout, which CI lays out but a fresh clone
+does not have. A test that reads from it says so with :func:`needs_shared`, and is skipped
+with a one-line reason where the folder is absent, rather than failing::
+
+    from conftest import needs_shared
+
+    @needs_shared("dem/odm_dsm_utm51n.tif")
+    def test_something_on_a_real_raster(): ...
+
+    pytestmark = needs_shared("bench/gtsplib")  # every test of a module
+"""
 
 from __future__ import annotations
 
@@ -13,7 +26,24 @@ from rasterio.transform import from_origin
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REAL_DEMS = SHARED / "dem"
+GTSPLIB = SHARED / "bench" / "gtsplib"
+CETSP = SHARED / "bench" / "cetsp"
 DEMO = REPO / "missions" / "demo"
+
+
+def needs_shared(path: str | Path) -> pytest.MarkDecorator:
+    """Skip unless ``path`` (relative to ``../shared``, or a path inside it) exists.
+
+    Use it as a decorator on a test or a parametrize case (``pytest.param(...,
+    marks=needs_shared(...))``), or as a module's ``pytestmark``. The reason reads
+    "needs ../shared/dem (not present on this machine)".
+    """
+    full = SHARED / path
+    shown = "../" + full.relative_to(SHARED.parent).as_posix()
+    return pytest.mark.skipif(
+        not full.exists(), reason=f"needs {shown} (not present on this machine)"
+    )
+
 
 WriteDem = Callable[..., Path]
 

@@ -236,6 +236,42 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["100000 targets in", "targets_100000.csv", "GiB", "plan fewer targets at a time"],
     ),
     "seed_negative": (["@seed_negative.args"], ["--seed -1", "0 to 4294967295"]),
+    "dem_not_georeferenced": (
+        ["--dem", str(BAD / "dem_not_georeferenced.tif")],
+        ["dem_not_georeferenced.tif", "coordinate reference system", "gdal_edit.py -a_srs"],
+    ),
+    "dem_without_geotransform": (
+        ["--dem", str(BAD / "dem_without_geotransform.tif")],
+        ["dem_without_geotransform.tif", "no geotransform", "export it georeferenced"],
+    ),
+    "csv_lat_lon_swapped": (
+        ["--targets", str(BAD / "csv_lat_lon_swapped.csv")],
+        ["csv_lat_lon_swapped.csv", "North gate", "did you swap lat and lon?", "Swap the lat"],
+    ),
+    "csv_one_row_swapped": (
+        ["--targets", str(BAD / "csv_one_row_swapped.csv")],
+        ["csv_one_row_swapped.csv", "'Hilltop'", "outside DEM", "did you swap lat and lon?"],
+    ),
+    "csv_lat_over_90_swapped": (
+        ["--targets", str(BAD / "csv_lat_over_90_swapped.csv")],
+        ["csv_lat_over_90_swapped.csv", "[-90, 90]", "did you swap lat and lon?"],
+    ),
+    "home_lat_lon_swapped": (
+        ["@home_lat_lon_swapped.args"],
+        ["--home 9.4230907,47.6887616", "did you swap lat and lon?", "--home 47.6887616,9.4230907"],
+    ),
+    "home_lat_over_90_swapped": (
+        ["@home_lat_over_90_swapped.args"],
+        ["--home 100.5018,13.7563", "did you swap lat and lon?", "--home 13.7563,100.5018"],
+    ),
+    "geojson_crs_unknown": (
+        ["--targets", str(BAD / "geojson_crs_unknown.geojson")],
+        ["geojson_crs_unknown.geojson", "'EPSG:999999' that is not known", "in WGS84"],
+    ),
+    "geojson_crs_link": (
+        ["--targets", str(BAD / "geojson_crs_link.geojson")],
+        ["geojson_crs_link.geojson", "does not name a CRS", "in WGS84"],
+    ),
 }
 
 
@@ -375,6 +411,23 @@ def test_bad_input(case: str, prior: str, tmp_path: Path, request: pytest.Fixtur
         assert not out.exists()
     assert snapshot(tmp_path) == files_before, "an earlier --out or its folder was changed"
     assert sorted(p.name for p in BAD.iterdir()) == before, "a sample folder was written to"
+
+
+@pytest.mark.parametrize(
+    "dem", ["dem_without_crs.tif", "dem_not_georeferenced.tif", "dem_without_geotransform.tif"]
+)
+def test_no_library_warning_reaches_the_operator(dem: str, tmp_path: Path) -> None:
+    # In a child with every warning shown: in process, pytest would capture them unseen.
+    args = ["plan", "--dem", str(BAD / dem), "--targets", TARGETS, "--out", str(tmp_path)]
+    child = subprocess.run(
+        [sys.executable, "-W", "always", "-m", "urpt_gcs", *args],
+        capture_output=True,
+        text=True,
+        timeout=_CHILD_TIMEOUT_S,
+    )
+    assert child.returncode == 1
+    assert child.stderr.count("\n") == 1, child.stderr
+    assert child.stderr.startswith(f"urpt-gcs: error: DEM '{BAD / dem}'")
 
 
 # name: (the file given to `urpt-gcs upload`, words the message must contain). The file is

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner, Result
-from conftest import DEMO
+from conftest import DEMO, GTSPLIB, needs_shared
 
 import urpt_gcs.bench.gtsplib as bench
 from urpt_gcs.bench.gtsplib import Row, bench_solvers, format_table, run_gtsplib, tour_cost
@@ -19,7 +19,6 @@ from urpt_gcs.formats.gtsplib import read_gtsplib
 from urpt_gcs.solvers import SOLVERS
 from urpt_gcs.solvers.routing import RoutingSolver
 
-GTSPLIB = Path(__file__).resolve().parents[1].parent / "shared" / "bench" / "gtsplib"
 REQUIRED = {"instance", "solver", "run", "cost", "gap_pct", "time_s", "best_known"}
 
 # Corners of a 30 x 40 rectangle, one per set; the centre, also in set 1, makes it 120 not 140.
@@ -148,6 +147,7 @@ def _cli(args: list[str]) -> Result:
     return CliRunner().invoke(main, args)
 
 
+@needs_shared(GTSPLIB)
 def test_cli_bench_on_the_shared_folder_writes_results(tmp_path: Path) -> None:
     out = tmp_path / "tmp"
     args = ["bench", "gtsplib", str(GTSPLIB), "--only", "11eil51", "--solver", "ortools"]
@@ -169,6 +169,7 @@ def test_cli_bench_on_the_shared_folder_writes_results(tmp_path: Path) -> None:
         (["--solver", "nope"], "--solver 'nope'"),
     ],
 )
+@needs_shared(GTSPLIB)
 def test_cli_bench_errors_are_one_line(extra: list[str], word: str) -> None:
     result = _cli(["bench", "gtsplib", str(GTSPLIB), "--time-limit", "0.1", *extra])
     assert result.exit_code == 1

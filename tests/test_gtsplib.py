@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import GTSPLIB, needs_shared
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -22,8 +23,8 @@ from urpt_gcs.errors import OutputError, SettingsError
 from urpt_gcs.formats.gtsplib import export_gtsplib, read_gtsplib, read_tour, write_gtsplib
 from urpt_gcs.gtsp import Instance, euclidean_matrix
 
-GTSPLIB = Path(__file__).resolve().parents[1].parent / "shared" / "bench" / "gtsplib"
 TOURS = sorted((GTSPLIB / "tours").glob("*.tour"))
+needs_gtsplib = needs_shared(GTSPLIB)
 
 
 def _header(path: Path) -> dict[str, str]:
@@ -40,6 +41,7 @@ def _best_known() -> dict[str, int]:
         return {row["instance"]: int(row["best_known"]) for row in csv.DictReader(fh)}
 
 
+@needs_gtsplib
 def test_the_folder_holds_every_kind_the_tours_exercise() -> None:
     kinds = set()
     for tour in TOURS:
@@ -52,6 +54,7 @@ def test_the_folder_holds_every_kind_the_tours_exercise() -> None:
     assert expected | {"FULL_MATRIX", "UPPER_ROW", "UPPER_DIAG_ROW"} <= kinds
 
 
+@needs_gtsplib
 @pytest.mark.parametrize("tour_path", TOURS, ids=lambda p: p.name.split(".")[0])
 def test_best_known_tour_has_exactly_its_published_length(tour_path: Path) -> None:
     name, length = tour_path.name.split(".")[:2]
@@ -86,6 +89,7 @@ def _tsplib(kind: str, a: tuple[float, float], b: tuple[float, float]) -> int:
     return int(math.sqrt(xd * xd + yd * yd) + 0.5)
 
 
+@needs_gtsplib
 @pytest.mark.parametrize("name", ["41gr202", "107att532", "200dsj1000", "212u1060"])
 def test_vectorised_distances_equal_the_scalar_rules(name: str) -> None:
     instance = read_gtsplib(GTSPLIB / f"{name}.gtsp")

@@ -5,17 +5,16 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import GTSPLIB, needs_shared
 
 from urpt_gcs.gtsp import Instance, euclidean_matrix
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.clustered import cluster_instance
 from urpt_gcs.solvers.heuristic import HeuristicSolver, SearchSettings, solve_clustered, warm_up
 
-GTSPLIB = Path(__file__).resolve().parents[2] / "shared" / "bench" / "gtsplib"
 SETTINGS = SolveSettings(time_limit_s=10.0, seed=0)
 
 
@@ -194,11 +193,9 @@ def test_search_settings_are_validated(field: str, value: object) -> None:
 @pytest.mark.parametrize(
     ("name", "best_known"), [("11eil51", 174), ("31pr152", 51576), ("35ftv170", 1205)]
 )
+@needs_shared(GTSPLIB)
 def test_reaches_best_known_on_gtsplib(name: str, best_known: int) -> None:
     gtsplib = pytest.importorskip("urpt_gcs.formats.gtsplib")
-    path = GTSPLIB / f"{name}.gtsp"
-    if not path.exists():
-        pytest.skip(f"{path} is not beside the checkout")
-    instance = gtsplib.read_gtsplib(path)
+    instance = gtsplib.read_gtsplib(GTSPLIB / f"{name}.gtsp")
     tour = HeuristicSolver().solve(instance, SETTINGS)
     assert tour.length == best_known

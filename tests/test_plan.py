@@ -9,7 +9,7 @@ import numpy as np
 import pyproj
 import pytest
 import rasterio
-from conftest import DEMO, REAL_DEMS
+from conftest import DEMO, REAL_DEMS, needs_shared
 from independent import check_mission, leg_clearances, load_raster, read_waypoints_file
 from pymavlink import mavutil
 
@@ -112,6 +112,7 @@ REAL_CASES = [
 ]
 
 
+@needs_shared(REAL_DEMS)
 @pytest.mark.parametrize(("name", "count", "box_m"), REAL_CASES)
 def test_real_rasters_plan_and_check(
     tmp_path: Path, name: str, count: int, box_m: float | None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 import zipfile
 from pathlib import Path
@@ -355,3 +356,62 @@ def test_duplicates_among_many_targets_are_found_across_grid_cells(tmp_path: Pat
 def test_points_just_over_the_tolerance_apart_are_distinct(tmp_path: Path) -> None:
     rows = [("A", 47.0, 8.0), ("B", 47.0 + 1.5e-7, 8.0), ("C", 47.0, 8.0 - 1.5e-7)]
     assert len(read_targets(_csv(tmp_path / "close.csv", rows)).targets) == 3
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "fix"),
+    [
+        (
+            "swapped.kml",
+            '<kml xmlns="http://www.opengis.net/kml/2.2"><Placemark><name>Temple</name>'
+            "<Point><coordinates>13.7563,100.5018</coordinates></Point></Placemark></kml>",
+            "KML writes lon,lat",
+        ),
+        (
+            "swapped.geojson",
+            '{"type": "Point", "coordinates": [13.7563, 100.5018]}',
+            "GeoJSON writes [lon, lat]",
+        ),
+    ],
+)
+def test_a_swapped_point_off_the_globe_gets_a_hint_in_the_files_own_order(
+    tmp_path: Path, name: str, text: str, fix: str
+) -> None:
+    path = tmp_path / name
+    path.write_text(text)
+    message = _assert_error(path, "outside [-90, 90]: did you swap lat and lon?")
+    assert fix in message
+
+
+def test_a_typo_among_good_points_gets_no_swap_hint() -> None:
+    message = _assert_error(BAD / "csv_lat_out_of_range.csv", "latitude 95.0")
+    assert "swap" not in message
+
+
+def test_geojson_with_a_projected_crs_member_is_read_in_that_crs() -> None:
+    # QGIS writes the GeoJSON 2008 `crs` member; these are three demo points in UTM 32N.
+    result = read_targets(TARGETS / "points_utm32n.geojson")
+    expected = {"North gate": (47.69168576, 9.42311436), "Hilltop": (47.691422212, 9.421379797)}
+    assert _names(result) == list(expected)
+    for target in result.targets:
+        assert (target.lat_deg, target.lon_deg) == pytest.approx(expected[target.name], abs=1e-8)
+    assert result.home is not None
+    assert (result.home.lat_deg, result.home.lon_deg) == pytest.approx(
+        (47.688761595, 9.423090709), abs=1e-8
+    )
+
+
+@pytest.mark.parametrize("name", ["urn:ogc:def:crs:OGC:1.3:CRS84", "EPSG:4326"])
+def test_geojson_with_a_wgs84_crs_member_is_read_as_lon_lat(tmp_path: Path, name: str) -> None:
+    path = tmp_path / "wgs84.geojson"
+    crs = {"type": "name", "properties": {"name": name}}
+    path.write_text(json.dumps({"type": "Point", "coordinates": [8.5412, 47.3781], "crs": crs}))
+    (target,) = read_targets(path).targets
+    assert (target.lat_deg, target.lon_deg) == (47.3781, 8.5412)
+
+
+def test_geojson_point_outside_its_crs_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "far.geojson"
+    crs = {"type": "name", "properties": {"name": "EPSG:32632"}}
+    path.write_text(json.dumps({"type": "Point", "coordinates": [5e8, 5e9], "crs": crs}))
+    _assert_error(path, "outside WGS 84 / UTM zone 32N")

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pyproj
 import pytest
 import rasterio
-from conftest import DEMO, REAL_DEMS, WriteDem
+from conftest import DEMO, REAL_DEMS, WriteDem, needs_shared
 from rasterio.transform import from_origin
 from rasterio.windows import Window
 
@@ -107,6 +108,7 @@ def test_undeclared_fill_values_are_masked(write_dem: WriteDem) -> None:
     assert np.nanmax(terrain.elevation_m) == 50.0
 
 
+@needs_shared(REAL_DEMS)
 def test_compound_crs_without_epsg_plans_in_its_horizontal_part() -> None:
     info = open_dem(REAL_DEMS / "codem_aoi_dsm_utm16n_egm2008.tif")
     assert info.crs.to_epsg() is None and info.crs.is_compound
@@ -114,6 +116,7 @@ def test_compound_crs_without_epsg_plans_in_its_horizontal_part() -> None:
     assert info.horizontal_crs.to_epsg() == 32616
 
 
+@needs_shared(REAL_DEMS)
 @pytest.mark.parametrize("name", ["pysheds_dem_wgs84.tif", "dsm2dtm_drone_dsm_wgs84.tif"])
 def test_geographic_dem_is_georeferenced_in_utm_without_resampling(name: str) -> None:
     path = REAL_DEMS / name
@@ -420,3 +423,20 @@ def test_valid_range_applies_to_metres_not_to_stored_feet(write_dem: WriteDem) -
     )
     with pytest.raises(DemError, match=r"-1219\.2 to -1219\.2 m, converted from foot"):
         check_elevations(open_dem(path))
+
+
+@pytest.mark.parametrize(
+    ("name", "words"),
+    [
+        ("dem_not_georeferenced.tif", "no coordinate reference system"),
+        ("dem_without_geotransform.tif", "no geotransform"),
+    ],
+)
+def test_a_raster_without_georeferencing_is_refused_without_a_warning(
+    name: str, words: str
+) -> None:
+    path = Path(__file__).resolve().parent / "data" / "bad" / name
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DemError, match=words):
+            open_dem(path)

@@ -6,13 +6,18 @@ formats) for anyone who wants to call them one by one.
 
 The planner (numpy, rasterio, numba ...) is imported on first use of ``plan``, ``Plan`` or
 ``PlanSettings``, so that the command line starts, and answers Ctrl-C, before it has loaded.
+Importing the package points numba's cache at the user's cache folder (:mod:`urpt_gcs.cache`).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from urpt_gcs.cache import configure_numba_cache
 from urpt_gcs.errors import UrptError
+
+# Before any submodule can import numba, which reads its cache settings once, on import.
+configure_numba_cache()
 
 __version__ = "0.1.0"
 

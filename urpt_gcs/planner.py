@@ -37,7 +37,7 @@ from urpt_gcs.safety import (
     split_sorties,
 )
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, choose, prepare, solve
-from urpt_gcs.targets import Target, TargetSet, read_targets
+from urpt_gcs.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
     WGS84,
     DemInfo,
@@ -118,7 +118,10 @@ class PlanSettings:
                 and math.isfinite(lon)
                 and -180 <= lon <= 180
             ):
-                raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees")
+                hint = ""
+                if -90 <= lon <= 90 and -180 <= lat <= 180:
+                    hint = f": did you swap lat and lon? Give --home LAT,LON: --home {lon},{lat}"
+                raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees{hint}")
         if self.band is not None and self.band < 1:
             raise SettingsError(f"--band {self.band} is below 1: bands are numbered from 1")
 
@@ -192,6 +195,48 @@ def _contains(
         and outer[2] >= inner[2]
         and outer[3] >= inner[3]
     )
+
+
+def _check_swapped(
+    info: DemInfo, site: TargetSet, home: tuple[float, float], home_source: str
+) -> None:
+    """Refuse, with a hint, a point off the DEM that swapped lat and lon would put on it.
+
+    Checked before anything else uses the points: a point far off the site otherwise fails
+    later and less clearly (no DEM window, a UTM zone edge, a distorted projection).
+    """
+    points = [(f"target '{t.name}'", t.lat_deg, t.lon_deg) for t in site.targets]
+    points.append((f"home ({home_source})", *home))
+    lat = np.array([p[1] for p in points])
+    lon = np.array([p[2] for p in points])
+    off = ~_on_dem(info, lat, lon)
+    swapped = off & _on_dem(info, lon, lat)
+    if not swapped.any():
+        return
+    i = int(np.flatnonzero(swapped)[0])
+    where, a, b = points[i]
+    problem = (
+        f"lies outside DEM '{info.path}', and ({b:.7f}, {a:.7f}) would lie on it: "
+        "did you swap lat and lon?"
+    )
+    if i == len(points) - 1 and home_source == "--home":
+        raise SettingsError(f"--home {a},{b} {problem} Give --home LAT,LON: --home {b},{a}")
+    fix = SWAP_FIX.get(Path(site.source).suffix.lower(), "swap the two numbers")
+    raise TargetsError(
+        f"{where} ({a:.7f}, {b:.7f}) in targets file '{site.source}' {problem} "
+        f"{fix[0].upper()}{fix[1:]}"
+    )
+
+
+def _on_dem(info: DemInfo, lat: FloatArray, lon: FloatArray) -> BoolArray:
+    """Which WGS84 points fall inside the DEM's extent (any point off the globe does not)."""
+    ok = (np.abs(lat) <= 90.0) & (np.abs(lon) <= 180.0)
+    to_src = pyproj.Transformer.from_crs(WGS84, info.horizontal_crs, always_xy=True)
+    sx, sy = to_src.transform(np.where(ok, lon, 0.0), np.where(ok, lat, 0.0), errcheck=False)
+    col, row = ~info.transform @ (np.asarray(sx), np.asarray(sy))
+    with np.errstate(invalid="ignore"):
+        inside = (col >= 0) & (col <= info.width_px) & (row >= 0) & (row <= info.height_px)
+    return np.asarray(ok & np.isfinite(col) & np.isfinite(row) & inside, dtype=np.bool_)
 
 
 def _check_ground(
@@ -398,6 +443,7 @@ def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _S
     )
     info = open_dem(dem_path, settings.band)
     home_lat, home_lon, home_source = _pick_home(targets, settings)
+    _check_swapped(info, targets, (home_lat, home_lon), home_source)
     lat_lon = [(t.lat_deg, t.lon_deg) for t in targets.targets]
     lats = [p[0] for p in lat_lon] + [home_lat]
     lons = [p[1] for p in lat_lon] + [home_lon]

@@ -16,12 +16,13 @@ import re
 import zipfile
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import Element, ParseError
 
 import defusedxml.ElementTree as safe_et
+import pyproj
 from defusedxml import DefusedXmlException
 
 from urpt_gcs.errors import TargetsError
@@ -52,6 +53,7 @@ HOME_NAMES = frozenset({"home", "launch"})
 # A KMZ member is decompressed at most this far, so a zip bomb cannot exhaust memory.
 _KMZ_MEMBER_LIMIT_BYTES = 64 * 1024 * 1024
 _KML_FIX = "fix the file or export it again from Google Earth"
+_WGS84 = pyproj.CRS.from_epsg(4326)
 _CSV_COLUMNS = {"name": ("name",), "lat": ("lat", "latitude"), "lon": ("lon", "lng", "longitude")}
 # What a damaged, encrypted or oddly compressed zip can raise.
 _ZIP_ERRORS: tuple[type[Exception], ...] = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error)
@@ -202,7 +204,48 @@ def _geojson_points(source: str, data: bytes) -> list[_Point]:
     if not points:
         problem = "contains no Point features (lines and polygons are ignored)"
         raise _error(source, problem, "add a Point feature for each target")
-    return points
+    crs = _geojson_crs(source, doc.get("crs"))
+    return points if crs is None else _to_wgs84(source, crs, points)
+
+
+def _geojson_crs(source: str, member: Any) -> pyproj.CRS | None:
+    """The CRS a GeoJSON 2008 ``crs`` member names (QGIS still writes one), or None for WGS84.
+
+    RFC 7946 dropped the member and fixed WGS84 lon/lat; a file that has one is read in the
+    CRS it names, since reading UTM metres as degrees would put every point off the globe or,
+    worse, somewhere else on it.
+    """
+    if member is None:
+        return None
+    fix = "export the file again in WGS84 (EPSG:4326), as RFC 7946 GeoJSON"
+    properties = member.get("properties") if isinstance(member, dict) else None
+    name = properties.get("name") if isinstance(properties, dict) else None
+    if member.get("type") != "name" or not isinstance(name, str):
+        shown = _q(json.dumps(member), 120)
+        raise _error(source, f"has a 'crs' member {shown} that does not name a CRS", fix)
+    try:
+        crs = pyproj.CRS.from_user_input(name)
+    except pyproj.exceptions.CRSError:
+        raise _error(source, f"names a CRS {_q(name)} that is not known", fix) from None
+    if not (crs.is_geographic or crs.is_projected):
+        raise _error(
+            source, f"names a CRS {_q(name)} that is neither geographic nor projected", fix
+        )
+    return None if crs.equals(_WGS84, ignore_axis_order=True) else crs
+
+
+def _to_wgs84(source: str, crs: pyproj.CRS, points: list[_Point]) -> list[_Point]:
+    # GeoJSON's positions are x, y (easting, northing) in every CRS, whatever its axis order.
+    to_wgs84 = pyproj.Transformer.from_crs(crs, _WGS84, always_xy=True)
+    # The readers keep a position's x in lon_deg and its y in lat_deg until this point.
+    lon, lat = to_wgs84.transform([p.lon_deg for p in points], [p.lat_deg for p in points])
+    converted = []
+    for p, x, y in zip(points, lon, lat, strict=True):
+        if not _on_globe(y, x):
+            problem = f"has {p.label()} at ({p.lon_deg}, {p.lat_deg}), outside {crs.name}"
+            raise _error(source, problem, "fix the coordinates or the file's 'crs' member")
+        converted.append(replace(p, lat_deg=float(y), lon_deg=float(x)))
+    return converted
 
 
 def _geojson_lon_lats(source: str, where: str, geometry: Any) -> list[tuple[float, float]]:
@@ -300,6 +343,18 @@ def _csv_number(source: str, where: str, column: str, text: str, delimiter: str)
         raise _error(source, problem, "fix the value (decimal degrees, e.g. 47.3971)") from None
 
 
+# A point with lat and lon swapped is taken to belong with the file's others this close to one.
+_SWAP_NEAR_DEG = 1.0
+_KML_ORDER = "KML writes lon,lat: swap the two numbers"
+_GEOJSON_ORDER = "GeoJSON writes [lon, lat]: swap the two numbers"
+SWAP_FIX = {
+    ".kml": _KML_ORDER,
+    ".kmz": _KML_ORDER,
+    ".geojson": _GEOJSON_ORDER,
+    ".json": _GEOJSON_ORDER,
+    ".csv": "swap the lat and lon values (or the column names)",
+}
+
 _READERS: dict[str, Callable[[str, bytes], list[_Point]]] = {
     ".kml": _kml_points,
     ".kmz": _kmz_points,
@@ -309,14 +364,40 @@ _READERS: dict[str, Callable[[str, bytes], list[_Point]]] = {
 }
 
 
-def _check(source: str, points: list[_Point]) -> TargetSet:
+def _on_globe(lat: float, lon: float) -> bool:
+    return math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180
+
+
+def _looks_swapped(p: _Point, points: list[_Point]) -> bool:
+    """Whether ``p``, off the globe, lands among the file's other points with lat and lon swapped.
+
+    Either the whole file is swapped (p swapped lies near the others swapped) or this one point
+    is (p swapped lies near the others as given); a lone point only has to land on the globe.
+    A typo (a latitude of 95 among points at 47 N) lands near neither, and gets no hint.
+    """
+    if not _on_globe(p.lon_deg, p.lat_deg):
+        return False
+    others = [q for q in points if q is not p]
+    if not others:
+        return True
+    return any(
+        abs(p.lon_deg - a) <= _SWAP_NEAR_DEG and abs(p.lat_deg - b) <= _SWAP_NEAR_DEG
+        for q in others
+        for a, b in ((q.lat_deg, q.lon_deg), (q.lon_deg, q.lat_deg))
+    )
+
+
+def _check(source: str, points: list[_Point], swap_fix: str) -> TargetSet:
     """Validate raw points and sort them into home and targets."""
     for p in points:
         for axis, value, bound in (("latitude", p.lat_deg, 90), ("longitude", p.lon_deg, 180)):
             if not (math.isfinite(value) and -bound <= value <= bound):
                 why = f"outside [-{bound}, {bound}]" if math.isfinite(value) else "not finite"
                 problem = f"has {p.label()} with {axis} {value}, {why}"
-                raise _error(source, problem, "fix the coordinates (decimal degrees, WGS84)")
+                fix = "fix the coordinates (decimal degrees, WGS84)"
+                if _looks_swapped(p, points):
+                    fix = f"did you swap lat and lon? {swap_fix[0].upper()}{swap_fix[1:]}"
+                raise _error(source, problem, fix)
     homes = [p for p in points if p.is_home]
     if len(homes) > 1:
         problem = f"names two homes, {homes[0].label()} and {homes[1].label()}"
@@ -404,4 +485,4 @@ def read_targets(path: Path) -> TargetSet:
     )
     if not data.strip():
         raise _error(source, "is empty", "export the targets again")
-    return _check(source, reader(source, data))
+    return _check(source, reader(source, data), SWAP_FIX[path.suffix.lower()])

@@ -19,7 +19,10 @@ caller treats NaN as "unknown ground", which blocks a line of sight and fails a 
 
 from __future__ import annotations
 
+import contextlib
 import math
+import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,6 +31,7 @@ import numpy.typing as npt
 import pyproj
 import rasterio
 import rasterio.errors
+import rasterio.io
 import rasterio.warp
 import rasterio.windows
 from affine import Affine
@@ -221,6 +225,19 @@ def vertical_unit(crs: pyproj.CRS, source: str) -> VerticalUnit:
     return VerticalUnit(name, to_m, declared=True)
 
 
+@contextlib.contextmanager
+def _open(path: Path) -> Iterator[rasterio.io.DatasetReader]:
+    """Open a raster for reading without rasterio's NotGeoreferencedWarning.
+
+    A DEM without georeferencing is refused by :func:`open_dem` with an error that says what
+    to do; the warning would print two lines of rasterio's own before it, telling nothing more.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+        with rasterio.open(path) as src:
+            yield src
+
+
 def open_dem(path: Path, band: int | None = None) -> DemInfo:
     """Check that ``path`` is a usable elevation raster and describe it without reading pixels.
 
@@ -234,13 +251,14 @@ def open_dem(path: Path, band: int | None = None) -> DemInfo:
     Raises
     ------
     DemError
-        When the raster cannot be used: missing, unreadable, without CRS, rotated, several
-        bands and none named, a complex band, or heights in a unit that is not a length.
+        When the raster cannot be used: missing, unreadable, without CRS or geotransform,
+        rotated, several bands and none named, a complex band, or heights in a unit that is
+        not a length.
     """
     name = str(path)
     require_regular_file(path, "DEM", "--dem", DemError)
     try:
-        with rasterio.open(path) as src:
+        with _open(path) as src:
             if src.crs is None:
                 raise DemError(
                     f"DEM '{name}' has no coordinate reference system: assign one "
@@ -256,6 +274,11 @@ def open_dem(path: Path, band: int | None = None) -> DemInfo:
                     "elevations: export the DSM as a real-valued band (e.g. float32)"
                 )
             transform = src.transform
+            if transform.is_identity:
+                raise DemError(
+                    f"DEM '{name}' has no geotransform (pixel size and position): export it "
+                    "georeferenced, or warp it (gdalwarp) if it holds ground control points"
+                )
             if transform.b != 0.0 or transform.d != 0.0 or transform.e >= 0.0:
                 raise DemError(
                     f"DEM '{name}' is rotated or not north-up: warp it north-up "
@@ -438,7 +461,7 @@ def _read_window(
         "around the targets",
         "plan targets that lie closer together, or lower --altitude/--clearance",
     )
-    with rasterio.open(info.path) as src:
+    with _open(info.path) as src:
         band = src.read(info.band, window=window, masked=True)
     return window, _clean(np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m)
 
@@ -517,7 +540,7 @@ def check_elevations(info: DemInfo) -> None:
         max(int(info.height_px / max(scale, 1.0)), 1),
         max(int(info.width_px / max(scale, 1.0)), 1),
     )
-    with rasterio.open(info.path) as src:
+    with _open(info.path) as src:
         band = src.read(info.band, out_shape=shape, masked=True)
     unit = info.vertical_unit
     z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band), unit.to_m)

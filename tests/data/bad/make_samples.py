@@ -37,8 +37,9 @@ def _tif(name: str, z: np.ndarray, **profile: object) -> bytes:
         "transform": from_origin(*DEMO_ORIGIN, 5.0, 5.0),
     }
     base.update(profile)
-    if base["crs"] is None:
-        del base["crs"]
+    for key in ("crs", "transform"):
+        if base[key] is None:
+            del base[key]
     with rasterio.open(path, "w", **base) as dst:
         dst.write(z.astype(base["dtype"]), 1)
     return path.read_bytes()
@@ -72,6 +73,9 @@ def _set_geokeys(name: str, keys: dict[int, int]) -> None:
 def main() -> None:
     flat = np.full((100, 100), 420.0)
     _tif("dem_without_crs.tif", flat, crs=None)
+    # As a scanned or exported picture comes: neither CRS nor geotransform.
+    _tif("dem_not_georeferenced.tif", flat, crs=None, transform=None, compress="deflate")
+    _tif("dem_without_geotransform.tif", flat, transform=None, compress="deflate")
     _tif("dem_all_nodata.tif", np.full((100, 100), -10000.0))
     _tif(
         "dem_rotated.tif",
