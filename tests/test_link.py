@@ -109,7 +109,7 @@ def test_upload_command_prints_one_line() -> None:
     with simulated(demo_mission()) as (_server, url):
         result = CliRunner().invoke(main, ["upload", str(DEMO_PLAN), "--connect", url])
     assert result.exit_code == 0, result.stderr
-    assert result.output.startswith("uploaded 28 items to ")
+    assert result.output.startswith("uploaded 29 items to ")
     assert "read back identical" in result.output
 
 
@@ -408,7 +408,7 @@ def test_over_capacity_names_no_space() -> None:
         assert len(server.vehicle.store) == 1  # nothing stored but home
     assert raised.value.result == "MAV_MISSION_NO_SPACE"
     assert raised.value.capacity == 10
-    assert "holds at most 10 items and the mission has 28" in str(raised.value)
+    assert "holds at most 10 items and the mission has 29" in str(raised.value)
 
 
 def test_refusal_after_boot_is_waited_out() -> None:
