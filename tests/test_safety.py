@@ -79,11 +79,13 @@ def test_clearance_over_a_thin_wall_is_exact(tmp_path: Path, write_dem: WriteDem
 def test_short_endurance_splits_into_sorties_that_together_see_everything(
     tmp_path: Path,
 ) -> None:
-    settings = PlanSettings(solve=FAST, endurance_min=3.0)
+    # At the default 5 m/s the demo's farthest stop alone needs 3.3 min; 3.8 min makes 3
+    # sorties of the tour found today.
+    settings = PlanSettings(solve=FAST, endurance_min=3.8)
     result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
     assert len(result.sorties) >= 2
     for sortie in result.sorties:
-        assert sortie.flight_time_s <= 3.0 * 60.0
+        assert sortie.flight_time_s <= 3.8 * 60.0
     out = tmp_path / "out"
     data = write_products(result, out, with_map=False)
     files = sorted(out.glob("mission_*.waypoints"))

@@ -271,7 +271,6 @@ async def _fly(
     watch = _Watch(link, await link.system.get_system_id())
     await watch.start()
     try:
-        await param.set_param_float("WPNAV_SPEED", float(mission.cruise_speed_m_s * 100.0))
         await telemetry.set_rate_position(settings.position_rate_hz)
         if settings.takeoff == "auto-options":
             await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
