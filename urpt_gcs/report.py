@@ -17,6 +17,25 @@ def _round(x: float, digits: int = 2) -> float | None:
     return round(x, digits) if math.isfinite(x) else None
 
 
+# Bright colours that stand apart on a grey hillshade and in Google Earth's imagery, one per
+# sortie in turn; the map, KML and GeoJSON share them.
+SORTIE_COLOURS = (
+    "#ffd400",
+    "#00b4ff",
+    "#ff3fa4",
+    "#5ce65c",
+    "#ff8c1a",
+    "#a77dff",
+    "#00e0c0",
+    "#ff4040",
+)
+
+
+def sortie_colour(number: int) -> str:
+    """The ``#rrggbb`` colour of sortie ``number`` (from 1)."""
+    return SORTIE_COLOURS[(number - 1) % len(SORTIE_COLOURS)]
+
+
 @dataclass(frozen=True, slots=True)
 class FlownStop:
     """A stop as its sortie's mission flies it: the written waypoint, in flight order."""
