@@ -36,6 +36,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 import urpt_gcs.formats as formats
 from urpt_gcs.errors import MissionFileError
 from urpt_gcs.formats import plan_json, read_plan, read_waypoints, waypoints_text
+from urpt_gcs.formats.qgc_plan import ReplayCheck, read_replay_check
 from urpt_gcs.mission import (
     AUTOPILOT_OF,
     DEFAULT_SPEED_M_S,
@@ -47,6 +48,7 @@ from urpt_gcs.mission import (
     MissionSettings,
     build_mission,
 )
+from urpt_gcs.targets import Target
 
 HOME = GeoPoint(47.397742, 8.545594, 488.5)
 # Seven decimals, so a lost digit shows.
@@ -248,6 +250,25 @@ def test_mavsdk_imports_plan(mission: Mission) -> None:
     ]
     assert {raw.mission_type for raw in fence} == {mavlink.MAV_MISSION_TYPE_FENCE}
     assert data.rally_items == []
+
+
+def test_the_replay_check_is_ignored_by_mavsdk_and_read_back(mission: Mission) -> None:
+    """The urptGcs key: MAVSDK's importer (like QGroundControl, which validates only the keys
+    it knows) takes the plan as without it; read_replay_check reads it back exactly."""
+    check = ReplayCheck(40.0, 12.5, (Target("T1", 47.3981234, 8.5461234),), 2, 3)
+    with_check = plan_json(mission, geofence=FENCE, check=check)
+    assert json.loads(with_check)["urptGcs"]["fovDeg"] == 40.0
+    plain = mavsdk_import(mission.firmware, "import_qgroundcontrol_mission_from_string",
+                          plan_json(mission, geofence=FENCE))  # fmt: skip
+    checked = mavsdk_import(
+        mission.firmware, "import_qgroundcontrol_mission_from_string", with_check
+    )
+    assert [imported_row(r) for r in checked.mission_items] == [
+        imported_row(r) for r in plain.mission_items
+    ]
+    assert mission_key(read_plan(with_check, "m.plan")) == mission_key(mission)
+    assert read_replay_check(with_check, "m.plan") == check
+    assert read_replay_check(plan_json(mission), "m.plan") is None
 
 
 def test_plan_round_trip(mission: Mission) -> None:

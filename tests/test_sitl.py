@@ -492,3 +492,98 @@ def free_tcp_port() -> int:
         probe.bind(("127.0.0.1", 0))
         port: int = probe.getsockname()[1]
     return port
+
+
+# --- replay any plan: the camera and targets travel with it -----------------------------------
+
+PLAN = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
+# At the default 5 m/s the demo needs 3 sorties at 3.8 min.
+SORTIE_ENDURANCE = "3.8"
+
+
+@pytest.fixture(scope="module")
+def sorties(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("sorties")
+    args = [*PLAN, "--endurance", SORTIE_ENDURANCE, "--no-map", "--quiet", "--out", str(out)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.stderr
+    assert (out / "mission_2.plan").is_file()
+    return out
+
+
+def _replay(*args: str) -> Any:
+    return CliRunner().invoke(main, [*REPLAY, *args, "--speedup", "200"])
+
+
+def test_a_plan_at_another_camera_replays_without_fov(tmp_path: Path) -> None:
+    out = tmp_path / "fov40"
+    made = CliRunner().invoke(
+        main, [*PLAN, "--fov", "40", "--no-map", "--quiet", "--out", str(out)]
+    )
+    assert made.exit_code == 0, made.stderr
+    result = _replay("--plan", str(out / "mission.plan"))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "16 targets at camera ±40°, clearance 10 m (from mission.plan, sortie 1 of 1)" in (
+        result.output
+    )
+    assert "result    PASS" in result.output and result.stderr == ""
+
+
+def test_a_sortie_is_checked_on_its_own_targets(sorties: Path) -> None:
+    check = json.loads((sorties / "mission_2.plan").read_text())["urptGcs"]
+    names = {t["name"] for t in check["targets"]}
+    summary = json.loads((sorties / "summary.json").read_text())
+    assert names == {n for s in summary["stops"] if s["sortie"] == 2 for n in s["sees"]}
+    assert 0 < len(names) < summary["targets"]
+    result = _replay("--plan", str(sorties / "mission_2.plan"))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert f"targets   {len(names)} of {len(names)} seen" in result.output
+    assert "(from mission_2.plan, sortie 2 of 3)" in result.output
+
+
+def test_a_waypoints_file_is_checked_from_the_summary_beside_it(
+    sorties: Path, tmp_path: Path
+) -> None:
+    result = _replay("--plan", str(sorties / "mission_3.waypoints"), "--fov", "35")
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "(from summary.json for mission_3.waypoints, sortie 3 of 3)" in result.output
+    assert "camera ±35°" in result.output
+    assert result.stderr == (
+        "urpt-gcs: warning: --fov 35 deg overrides the 30 deg mission_3.waypoints was planned for\n"
+    )
+    # A summary of another plan does not describe the file: every target, and a warning.
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    (alone / "mission_3.waypoints").write_bytes((sorties / "mission_3.waypoints").read_bytes())
+    (alone / "summary.json").write_bytes((DEMO / "out" / "summary.json").read_bytes())
+    result = _replay("--plan", str(alone / "mission_3.waypoints"))
+    assert result.exit_code == 1
+    assert "does not describe mission_3.waypoints" in result.stderr
+    assert "from --fov and --min-clearance, every target of --targets" in result.output
+
+
+def test_sorties_replayed_together_see_every_target(sorties: Path) -> None:
+    result = _replay("--plan", str(sorties))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert result.output.count("result    PASS") == 4  # three sorties and all together
+    assert "together: 3 flights, 12 photos\n  targets   16 of 16 seen" in result.output
+    # Two of the three pass on their own, and together miss the third's targets.
+    result = _replay(
+        "--plan", str(sorties / "mission_1.plan"), "--plan", str(sorties / "mission_2.plan")
+    )
+    assert result.exit_code == 1
+    assert result.output.count("result    PASS") == 2
+    assert "photographed by none of the 2 flights" in result.stderr
+
+
+def test_a_bad_replay_key_is_one_line(sorties: Path, tmp_path: Path) -> None:
+    plan = json.loads((sorties / "mission_1.plan").read_text())
+    plan["urptGcs"]["targets"][0] = {"name": "T01", "lat": 95.0, "lon": 9.4}
+    bad = tmp_path / "bad.plan"
+    bad.write_text(json.dumps(plan))
+    result = _replay("--plan", str(bad))
+    assert result.exit_code == 1
+    assert result.stderr == (
+        f"urpt-gcs: error: {bad}: urptGcs: target 'T01' is not a WGS84 position: remove the "
+        "urptGcs key (replay then uses its flags) or plan again\n"
+    )

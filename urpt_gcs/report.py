@@ -149,6 +149,7 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
             "vertical_unit_declared": plan.dem.vertical_unit.declared,
             "planned_in_source_crs": plan.crs == plan.dem.horizontal_crs,
         },
+        "min_clearance_m": plan.settings.min_clearance_m,
         "min_leg_clearance_m": _round(
             min((leg.min_clearance_m for leg in plan.legs), default=math.nan)
         ),
