@@ -237,23 +237,23 @@ def test_lost_acceptance_is_settled_by_the_read_back(
 def test_lost_acceptance_and_a_wrong_read_back_is_never_success() -> None:
     mission = demo_mission()
     with (
-        simulated(mission, corrupt_seq=5) as (server, url),
+        simulated(mission, corrupt_seq=6) as (server, url),
         pytest.raises(LinkError) as raised,
     ):
         dropped = _drop_first_acceptance(server)
         upload(mission, url, retries=0)
     assert dropped
-    assert "seq 5 (NAV_WAYPOINT): x (param5)" in str(raised.value)
+    assert "seq 6 (NAV_WAYPOINT): x (param5)" in str(raised.value)
     assert "do not fly it" in str(raised.value)
 
 
 def test_corrupted_read_back_is_never_success() -> None:
     mission = demo_mission()
-    with simulated(mission, corrupt_seq=5) as (_server, url), pytest.raises(LinkError) as raised:
+    with simulated(mission, corrupt_seq=6) as (_server, url), pytest.raises(LinkError) as raised:
         upload(mission, url, retries=1)
     message = str(raised.value)
     assert "after 2 attempts" in message
-    assert "seq 5 (NAV_WAYPOINT): x (param5)" in message
+    assert "seq 6 (NAV_WAYPOINT): x (param5)" in message
     assert "do not fly it" in message
 
 
