@@ -36,8 +36,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 import urpt_gcs.formats as formats
 from urpt_gcs.errors import MissionFileError
 from urpt_gcs.formats import plan_json, read_plan, read_waypoints, waypoints_text
+from urpt_gcs.formats.qgc_plan import ReplayCheck, read_replay_check
 from urpt_gcs.mission import (
     AUTOPILOT_OF,
+    DEFAULT_SPEED_M_S,
     FIRMWARES,
     Firmware,
     GeoPoint,
@@ -46,6 +48,7 @@ from urpt_gcs.mission import (
     MissionSettings,
     build_mission,
 )
+from urpt_gcs.targets import Target
 
 HOME = GeoPoint(47.397742, 8.545594, 488.5)
 # Seven decimals, so a lost digit shows.
@@ -249,6 +252,25 @@ def test_mavsdk_imports_plan(mission: Mission) -> None:
     assert data.rally_items == []
 
 
+def test_the_replay_check_is_ignored_by_mavsdk_and_read_back(mission: Mission) -> None:
+    """The urptGcs key: MAVSDK's importer (like QGroundControl, which validates only the keys
+    it knows) takes the plan as without it; read_replay_check reads it back exactly."""
+    check = ReplayCheck(40.0, 12.5, (Target("T1", 47.3981234, 8.5461234),), 2, 3)
+    with_check = plan_json(mission, geofence=FENCE, check=check)
+    assert json.loads(with_check)["urptGcs"]["fovDeg"] == 40.0
+    plain = mavsdk_import(mission.firmware, "import_qgroundcontrol_mission_from_string",
+                          plan_json(mission, geofence=FENCE))  # fmt: skip
+    checked = mavsdk_import(
+        mission.firmware, "import_qgroundcontrol_mission_from_string", with_check
+    )
+    assert [imported_row(r) for r in checked.mission_items] == [
+        imported_row(r) for r in plain.mission_items
+    ]
+    assert mission_key(read_plan(with_check, "m.plan")) == mission_key(mission)
+    assert read_replay_check(with_check, "m.plan") == check
+    assert read_replay_check(plan_json(mission), "m.plan") is None
+
+
 def test_plan_round_trip(mission: Mission) -> None:
     assert mission_key(read_plan(plan_json(mission), "m.plan")) == mission_key(mission)
 
@@ -362,6 +384,7 @@ coordinates = st.tuples(
     waypoints=st.lists(coordinates, min_size=1, max_size=5),
     altitude_m=st.floats(min_value=0.5, max_value=500.0),
     hold_s=st.floats(min_value=0.0, max_value=3600.0),
+    speed_m_s=st.floats(min_value=0.1, max_value=50.0),
     firmware=st.sampled_from(FIRMWARES),
 )
 def test_both_formats_round_trip_exactly(
@@ -370,14 +393,30 @@ def test_both_formats_round_trip_exactly(
     waypoints: list[tuple[float, float]],
     altitude_m: float,
     hold_s: float,
+    speed_m_s: float,
     firmware: Firmware,
 ) -> None:
-    settings_ = MissionSettings(firmware=firmware, hold_s=hold_s)
+    settings_ = MissionSettings(
+        firmware=firmware, hold_s=hold_s, cruise_speed_m_s=speed_m_s, hover_speed_m_s=speed_m_s
+    )
     mission = build_mission(GeoPoint(*home, home_amsl_m), waypoints, altitude_m, settings_)
     assert mission_key(read_plan(plan_json(mission), "m.plan")) == mission_key(mission)
     back = read_waypoints(waypoints_text(mission), "m.waypoints", firmware)
-    # .waypoints has no speeds: they read back as defaults, which these missions use too.
+    # .waypoints has no speed fields: the speed is read from the DO_CHANGE_SPEED item.
     assert mission_key(back) == mission_key(mission)
+
+
+def test_the_speed_is_set_after_the_take_off(mission: Mission) -> None:
+    """DO_CHANGE_SPEED right after NAV_TAKEOFF: both firmwares run it when the climb is done,
+    before the first leg; ground speed, throttle unchanged (-1)."""
+    first, speed = mission.items[:2]
+    assert first.command == mavlink.MAV_CMD_NAV_TAKEOFF
+    assert speed.command == mavlink.MAV_CMD_DO_CHANGE_SPEED
+    assert speed.params[:4] == (mavlink.SPEED_TYPE_GROUNDSPEED, 5.0, -1.0, 0.0)
+    assert mission.cruise_speed_m_s == 5.0 == MissionSettings().cruise_speed_m_s
+    no_speed = replace(mission, items=(first, *mission.items[2:]))
+    back = read_waypoints(waypoints_text(no_speed), "m.waypoints", mission.firmware)
+    assert back.cruise_speed_m_s == DEFAULT_SPEED_M_S
 
 
 # --- bad files -------------------------------------------------------------------------------
@@ -401,24 +440,24 @@ def _plan_with(change: str) -> str:
     elif change == "unknown firmwareType":
         body["firmwareType"] = 0
     elif change == "text param":
-        body["items"][3]["params"][0] = "2"
+        body["items"][4]["params"][0] = "2"
     elif change == "null latitude":
-        body["items"][2]["params"][4] = None
+        body["items"][3]["params"][4] = None
     elif change == "huge integer":
-        body["items"][2]["params"][0] = 10**400
+        body["items"][3]["params"][0] = 10**400
     elif change == "negative hold":
-        body["items"][2]["params"][0] = -5
+        body["items"][3]["params"][0] = -5
     elif change == "yaw 1e20":
-        body["items"][2]["params"][3] = 1e20
+        body["items"][3]["params"][3] = 1e20
     elif change == "below any ground":
-        body["items"][2]["params"][6] = -1000.0
+        body["items"][3]["params"][6] = -1000.0
     elif change == "null hold":
-        body["items"][2]["params"][0] = None
+        body["items"][3]["params"][0] = None
     elif change == "latitude 95":
-        body["items"][2]["params"][4] = 95.0
+        body["items"][3]["params"][4] = 95.0
     elif change == "zero speed":
-        speed = {**body["items"][1], "command": 178, "params": [1, 0, -1, 0, 0, 0, 0]}
-        body["items"].insert(1, speed)
+        assert body["items"][1]["command"] == 178  # DO_CHANGE_SPEED after the take-off
+        body["items"][1]["params"][1] = 0
     elif change == "65535 items":
         body["items"] += [body["items"][2]] * (65_535 - len(body["items"]))
     return json.dumps(plan)
@@ -438,24 +477,24 @@ BAD_PLANS = {
     "no items": (_plan_with("no items"), "mission.items is missing"),
     "no mission": (_plan_with("no mission"), "no mission section"),
     "unknown firmwareType": (_plan_with("unknown firmwareType"), "firmwareType 0 is not supp"),
-    "text param": (_plan_with("text param"), "index 3: params must be a list of 7 numbers"),
-    "null latitude": (_plan_with("null latitude"), "index 2: params 5-7 (x, y, z) must be numbers"),
-    "huge integer": (_plan_with("huge integer"), "index 2: params must be a list"),
+    "text param": (_plan_with("text param"), "index 4: params must be a list of 7 numbers"),
+    "null latitude": (_plan_with("null latitude"), "index 3: params 5-7 (x, y, z) must be numbers"),
+    "huge integer": (_plan_with("huge integer"), "index 3: params must be a list"),
     "negative hold": (
         _plan_with("negative hold"),
-        "index 2 (NAV_WAYPOINT): param1 (hold) -5 s is out of range (ArduPilot would keep "
+        "index 3 (NAV_WAYPOINT): param1 (hold) -5 s is out of range (ArduPilot would keep "
         "65531 s): give a hold of 0 to 65535 seconds",
     ),
     "yaw 1e20": (
         _plan_with("yaw 1e20"),
-        "index 2 (NAV_WAYPOINT): param4 (yaw) 1e+20 deg is out of range: give a yaw of -360",
+        "index 3 (NAV_WAYPOINT): param4 (yaw) 1e+20 deg is out of range: give a yaw of -360",
     ),
     "below any ground": (
         _plan_with("below any ground"),
-        "index 2 (NAV_WAYPOINT): altitude (param7) -1000 m relative to home (488.5 m AMSL) is "
+        "index 3 (NAV_WAYPOINT): altitude (param7) -1000 m relative to home (488.5 m AMSL) is "
         "-511.5 m AMSL, below the lowest ground on Earth: give an altitude of -988.5 m or more",
     ),
-    "null hold": (_plan_with("null hold"), "index 2 (NAV_WAYPOINT): param1 (hold) is NaN"),
+    "null hold": (_plan_with("null hold"), "index 3 (NAV_WAYPOINT): param1 (hold) is NaN"),
     "latitude 95": (_plan_with("latitude 95"), "latitude (param5) 95 is not in [-90, 90]"),
     "zero speed": (
         _plan_with("zero speed"),

@@ -109,7 +109,7 @@ def test_upload_command_prints_one_line() -> None:
     with simulated(demo_mission()) as (_server, url):
         result = CliRunner().invoke(main, ["upload", str(DEMO_PLAN), "--connect", url])
     assert result.exit_code == 0, result.stderr
-    assert result.output.startswith("uploaded 28 items to ")
+    assert result.output.startswith("uploaded 29 items to ")
     assert "read back identical" in result.output
 
 
@@ -237,23 +237,23 @@ def test_lost_acceptance_is_settled_by_the_read_back(
 def test_lost_acceptance_and_a_wrong_read_back_is_never_success() -> None:
     mission = demo_mission()
     with (
-        simulated(mission, corrupt_seq=5) as (server, url),
+        simulated(mission, corrupt_seq=6) as (server, url),
         pytest.raises(LinkError) as raised,
     ):
         dropped = _drop_first_acceptance(server)
         upload(mission, url, retries=0)
     assert dropped
-    assert "seq 5 (NAV_WAYPOINT): x (param5)" in str(raised.value)
+    assert "seq 6 (NAV_WAYPOINT): x (param5)" in str(raised.value)
     assert "do not fly it" in str(raised.value)
 
 
 def test_corrupted_read_back_is_never_success() -> None:
     mission = demo_mission()
-    with simulated(mission, corrupt_seq=5) as (_server, url), pytest.raises(LinkError) as raised:
+    with simulated(mission, corrupt_seq=6) as (_server, url), pytest.raises(LinkError) as raised:
         upload(mission, url, retries=1)
     message = str(raised.value)
     assert "after 2 attempts" in message
-    assert "seq 5 (NAV_WAYPOINT): x (param5)" in message
+    assert "seq 6 (NAV_WAYPOINT): x (param5)" in message
     assert "do not fly it" in message
 
 
@@ -408,7 +408,7 @@ def test_over_capacity_names_no_space() -> None:
         assert len(server.vehicle.store) == 1  # nothing stored but home
     assert raised.value.result == "MAV_MISSION_NO_SPACE"
     assert raised.value.capacity == 10
-    assert "holds at most 10 items and the mission has 28" in str(raised.value)
+    assert "holds at most 10 items and the mission has 29" in str(raised.value)
 
 
 def test_refusal_after_boot_is_waited_out() -> None:

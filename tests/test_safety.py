@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyproj
@@ -18,7 +19,7 @@ from shapely.geometry import Point, shape
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError
-from urpt_gcs.planner import PlanSettings, plan
+from urpt_gcs.planner import Plan, PlanSettings, plan
 from urpt_gcs.products import write_products
 from urpt_gcs.solvers import SolveSettings
 from urpt_gcs.targets import read_targets
@@ -79,11 +80,13 @@ def test_clearance_over_a_thin_wall_is_exact(tmp_path: Path, write_dem: WriteDem
 def test_short_endurance_splits_into_sorties_that_together_see_everything(
     tmp_path: Path,
 ) -> None:
-    settings = PlanSettings(solve=FAST, endurance_min=3.0)
+    # At the default 5 m/s the demo's farthest stop alone needs 3.3 min; 3.8 min makes 3
+    # sorties of the tour found today.
+    settings = PlanSettings(solve=FAST, endurance_min=3.8)
     result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
     assert len(result.sorties) >= 2
     for sortie in result.sorties:
-        assert sortie.flight_time_s <= 3.0 * 60.0
+        assert sortie.flight_time_s <= 3.8 * 60.0
     out = tmp_path / "out"
     data = write_products(result, out, with_map=False)
     files = sorted(out.glob("mission_*.waypoints"))
@@ -146,23 +149,45 @@ def test_geofence_encloses_the_flight(demo_outputs: tuple[Path, dict]) -> None:
             assert fence.contains(Point(item["params"][5], item["params"][4]))
 
 
+def _kml_folders(path: Path) -> tuple[Any, dict[str, list[Any]]]:
+    doc = fastkml.KML.from_string(path.read_bytes())
+    (document,) = doc.features
+    return document, {f.name: list(f.features) for f in document.features}
+
+
 def test_kml_read_back_by_fastkml(demo_outputs: tuple[Path, dict]) -> None:
     out, data = demo_outputs
-    doc = fastkml.KML.from_string((out / "plan.kml").read_bytes())
-    (document,) = doc.features
-    folders = {f.name: list(f.features) for f in document.features}
+    _, folders = _kml_folders(out / "plan.kml")
     assert len(folders["Targets"]) == data["targets"]
-    assert len(folders["Viewpoints"]) == data["tour_stops"]
     assert len(folders["Visibility regions"]) == data["targets"]
-    (tour,) = folders["Tour"]
-    coords = list(tour.geometry.coords)
+    route, *stops = folders["Sortie 1"]
+    assert len(stops) == data["tour_stops"]
+    coords = list(route.geometry.coords)
     assert len(coords) == data["tour_stops"] + 2
     assert {round(c[2], 2) for c in coords} == {data["altitude_amsl_m"]}
-    first = folders["Viewpoints"][0].geometry
+    first = stops[0].geometry
     assert first.x == pytest.approx(data["stops"][0]["lon_deg"], abs=1e-7)
     assert first.y == pytest.approx(data["stops"][0]["lat_deg"], abs=1e-7)
     names = {p.name for p in folders["Targets"]}
     assert names == set(data["target_names"])
+
+
+def test_kml_styles_tell_targets_stops_and_regions_apart(demo_outputs: tuple[Path, dict]) -> None:
+    out, _ = demo_outputs
+    document, folders = _kml_folders(out / "plan.kml")
+    styles = {style.id: style for style in document.styles}
+    assert {"target", "home", "region", "sortie-1"} <= styles.keys()
+    used = {folder: {mark.style_url.url for mark in marks} for folder, marks in folders.items()}
+    assert used["Targets"] == {"#target"}
+    assert used["Visibility regions"] == {"#region"}
+    assert used["Sortie 1"] == {"#sortie-1"}
+    colours = {
+        style_id: next(
+            part.color for part in styles[style_id].styles if type(part).__name__ != "LabelStyle"
+        )
+        for style_id in ("target", "region", "sortie-1")
+    }
+    assert len(set(colours.values())) == 3, colours
 
 
 def test_geojson_read_back_by_shapely(demo_outputs: tuple[Path, dict]) -> None:
@@ -172,11 +197,118 @@ def test_geojson_read_back_by_shapely(demo_outputs: tuple[Path, dict]) -> None:
     for feature in collection["features"]:
         kinds.setdefault(feature["properties"]["kind"], []).append(shape(feature["geometry"]))
     assert len(kinds["target"]) == data["targets"]
-    assert len(kinds["viewpoint"]) == data["tour_stops"]
+    assert len(kinds["stop"]) == data["tour_stops"]
     assert all(g.is_valid and g.area > 0 for g in kinds["region"])
-    (tour,) = kinds["tour"]
+    (tour,) = kinds["sortie"]
     # Each target lies inside its own region polygon.
     for region, target in zip(kinds["region"], kinds["target"], strict=True):
         assert region.buffer(1e-9).contains(Point(target.x, target.y))
     geod = pyproj.Geod(ellps="WGS84")
     assert geod.geometry_length(tour) == pytest.approx(data["tour_length_m"], rel=2e-3)
+
+
+# --- a plan in sorties, as written and as drawn ----------------------------------------------
+
+# At the default 5 m/s the demo's tour needs 3 sorties at 3.8 min (the farthest stop alone
+# takes 3.3 min).
+SORTIE_ENDURANCE_MIN = 3.8
+
+
+@pytest.fixture(scope="module")
+def sortie_plan(tmp_path_factory: pytest.TempPathFactory) -> tuple[Plan, Path, dict]:
+    out = tmp_path_factory.mktemp("sorties")
+    settings = PlanSettings(solve=FAST, endurance_min=SORTIE_ENDURANCE_MIN)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    data = write_products(result, out, with_map=True)
+    return result, out, data
+
+
+def _flown_routes(out: Path) -> list[list[tuple[float, float]]]:
+    """Each sortie from its mission_N.waypoints, read with pymavlink: home, waypoints, home
+    as (longitude, latitude)."""
+    files = sorted(out.glob("mission_*.waypoints"), key=lambda f: int(f.stem.split("_")[1]))
+    routes = []
+    for f in files:
+        flown = read_waypoints_file(f)
+        home = (flown.home[1], flown.home[0])
+        routes.append([home, *((w[1], w[0]) for w in flown.waypoints), home])
+    return routes
+
+
+def _same_route(drawn: list[tuple[float, ...]], flown: list[tuple[float, float]]) -> None:
+    assert len(drawn) == len(flown)
+    np.testing.assert_allclose(np.array(drawn)[:, :2], np.array(flown), rtol=0, atol=1e-9)
+
+
+def test_the_tour_is_split_into_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
+    result, out, data = sortie_plan
+    print(f"\n{len(result.sorties)} sorties at --endurance {SORTIE_ENDURANCE_MIN:g} min")
+    assert len(result.sorties) >= 2
+    assert len(_flown_routes(out)) == len(result.sorties) == len(data["sorties"])
+
+
+def test_kml_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
+    result, out, data = sortie_plan
+    document, folders = _kml_folders(out / "plan.kml")
+    stops_seen = []
+    for number, flown in enumerate(_flown_routes(out), start=1):
+        route, *stops = folders[f"Sortie {number}"]
+        _same_route(list(route.geometry.coords), flown)
+        # The stops, numbered in flight order, sit on the route's waypoints.
+        _same_route([(s.geometry.x, s.geometry.y) for s in stops], flown[1:-1])
+        stops_seen += [int(s.name) for s in stops]
+        assert {s.style_url.url for s in [route, *stops]} == {f"#sortie-{number}"}
+    assert stops_seen == list(range(1, data["tour_stops"] + 1))
+    colours = {
+        next(p.color for p in style.styles if type(p).__name__ == "LineStyle")
+        for style in document.styles
+        if style.id.startswith("sortie-")
+    }
+    assert len(colours) == len(result.sorties)
+
+
+def test_geojson_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
+    _, out, data = sortie_plan
+    features = json.loads((out / "plan.geojson").read_text())["features"]
+    routes = [f for f in features if f["properties"]["kind"] == "sortie"]
+    stops = [f for f in features if f["properties"]["kind"] == "stop"]
+    flown = _flown_routes(out)
+    assert [r["properties"]["sortie"] for r in routes] == list(range(1, len(flown) + 1))
+    for route, legs in zip(routes, flown, strict=True):
+        line = shape(route["geometry"])
+        assert isinstance(line, shapely.LineString) and line.is_closed
+        _same_route(list(line.coords), legs)
+        number = route["properties"]["sortie"]
+        mine = [s for s in stops if s["properties"]["sortie"] == number]
+        assert route["properties"]["stops"] == len(mine)
+        _same_route([shape(s["geometry"]).coords[0] for s in mine], legs[1:-1])
+        etas = [s["properties"]["eta_s"] for s in mine]
+        assert etas == sorted(etas) and etas[0] > 0.0
+        assert etas[-1] < route["properties"]["flight_time_s"]
+    assert [s["properties"]["order"] for s in stops] == list(range(1, len(stops) + 1))
+    # What each stop sees, together every target; as summary.json says.
+    seen = {name for s in stops for name in s["properties"]["sees"]}
+    assert seen == set(data["target_names"])
+    assert [s["properties"]["sees"] for s in stops] == [s["sees"] for s in data["stops"]]
+    assert [s["properties"]["eta_s"] for s in stops] == [s["eta_s"] for s in data["stops"]]
+
+
+def test_map_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
+    from urpt_gcs.mapview import map_figure
+
+    result, out, data = sortie_plan
+    assert (out / "map.png").read_bytes().startswith(b"\x89PNG")
+    ax = map_figure(result, data).axes[0]  # the other is the colour bar
+    drawn = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
+    to_geo = pyproj.Transformer.from_crs(result.crs, "EPSG:4326", always_xy=True)
+    flown = _flown_routes(out)
+    assert sorted(drawn) == [f"sortie {n}" for n in range(1, len(flown) + 1)]
+    colours = set()
+    for number, legs in enumerate(flown, start=1):
+        line = drawn[f"sortie {number}"]
+        lon, lat = to_geo.transform(*line.get_data())
+        _same_route(list(zip(lon, lat, strict=True)), legs)
+        colours.add(line.get_color())
+    assert len(colours) == len(flown)
+    labels = sorted(int(t.get_text()) for t in ax.texts if t.get_text().isdigit())
+    assert labels == list(range(1, data["tour_stops"] + 1))

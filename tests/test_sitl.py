@@ -26,7 +26,7 @@ from urpt_gcs.readback import WireItem, compare, wire_items
 from urpt_gcs.sitl import VehicleSettings
 from urpt_gcs.sitl.events import Reached, Text
 from urpt_gcs.sitl.model import Vehicle
-from urpt_gcs.sitl.replay import ReplaySettings, fly, replay
+from urpt_gcs.sitl.replay import ReplaySettings, fly, read_mission, replay
 from urpt_gcs.sitl.store import Home, Item, MissionStore
 from urpt_gcs.sitl.transfer import REREQUEST_S, UPLOAD_TIMEOUT_S, MissionTransfer
 
@@ -173,7 +173,6 @@ def test_arming_in_auto_needs_auto_options_bit_0() -> None:
 def test_the_demo_mission_is_flown(start: str) -> None:
     mission = demo_mission()
     vehicle = _loaded(mission)
-    vehicle.params.set("WPNAV_SPEED", mission.cruise_speed_m_s * 100.0)
     assert vehicle.arm(0.0) == mavlink.MAV_RESULT_ACCEPTED
     if start == "auto-options":
         vehicle.params.set("AUTO_OPTIONS", 2)
@@ -197,6 +196,59 @@ def test_the_demo_mission_is_flown(start: str) -> None:
     nav = [w.seq for w in flown if w.command in nav_commands]
     assert [e.seq for e in vehicle.events if isinstance(e, Reached)] == nav
     assert 250.0 < vehicle.time_s < 400.0
+
+
+def test_the_mission_sets_the_speed_and_rtl_does_not_keep_it() -> None:
+    """Cruise at the mission's DO_CHANGE_SPEED, not WPNAV_SPEED (10 m/s here); accelerate and
+    brake at WPNAV_ACCEL; RTL at WPNAV_SPEED, as ArduCopter's ModeRTL::init sets it."""
+    mission = demo_mission()
+    assert mission.cruise_speed_m_s == 5.0
+    vehicle = _loaded(mission)
+    vehicle.params.set("AUTO_OPTIONS", 2)
+    vehicle.arm(0.0)
+    assert vehicle.set_mode(COPTER_AUTO)
+    rtl = len(vehicle.store) - 1
+    assert vehicle.store.read(rtl).command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+    mission_speeds, rtl_speeds, accels = [], [], []
+    previous = 0.0
+    while vehicle.armed and vehicle.time_s < 1200.0:
+        vehicle.step(0.05)
+        speed = vehicle.ground_speed_m_s
+        (rtl_speeds if vehicle.current_seq == rtl else mission_speeds).append(speed)
+        accels.append(abs(speed - previous) / 0.05)
+        previous = speed
+    assert max(mission_speeds) == pytest.approx(5.0)
+    assert max(rtl_speeds) == pytest.approx(10.0)
+    assert sorted(accels)[len(accels) // 2] <= 2.5 + 1e-6
+
+
+@pytest.mark.parametrize("east_m", [100.0, 6.0])
+def test_a_leg_takes_what_the_estimate_charges(east_m: float) -> None:
+    """Climb, one leg from rest to rest (long enough to cruise, or not) and the hold, on the
+    simulator and in the plan's flight model."""
+    from urpt_gcs.mission import GeoPoint, MissionSettings, build_mission
+    from urpt_gcs.planner import PlanSettings, flight_model
+
+    home = GeoPoint(47.3977420, 8.5455940, 488.0)
+    lon = home.lon_deg + math.degrees(east_m / (6_378_137.0 * math.cos(math.radians(47.397742))))
+    mission = build_mission(home, [(home.lat_deg, lon)], 20.0, MissionSettings())
+    vehicle = _loaded(mission)
+    vehicle.params.set("AUTO_OPTIONS", 2)
+    vehicle.arm(0.0)
+    assert vehicle.set_mode(COPTER_AUTO)
+    while not vehicle.photos:
+        vehicle.step(0.01)
+    model = flight_model(PlanSettings())
+    expected = model.takeoff_s(20.0) + float(model.leg_s(east_m)) + model.hold_s
+    assert vehicle.photos[0].time_s == pytest.approx(expected, abs=0.1)
+
+
+def test_a_second_auto_forgets_the_first_missions_speed() -> None:
+    vehicle = _loaded(demo_mission())
+    vehicle.speed_m_s = 3.0
+    vehicle.arm(0.0)
+    assert vehicle.set_mode(COPTER_AUTO)
+    assert vehicle.cruise_m_s() == 10.0  # WPNAV_SPEED until the DO_CHANGE_SPEED runs
 
 
 def test_rtl_climbs_to_rtl_alt_flies_home_and_lands() -> None:
@@ -354,6 +406,17 @@ def test_replay_of_the_demo_mission_passes() -> None:
     print(f"\nreplay at 100x: {wall:.1f} s wall\n{result.output}")
 
 
+@pytest.mark.parametrize("name", ["mission.plan", "mission.waypoints"])
+def test_replay_flies_the_estimated_flight_time(name: str) -> None:
+    """The vehicle flies the planned speed from either file, without replay setting a
+    parameter, and the flight takes what the plan's estimate says, within 10 %."""
+    estimate = json.loads((DEMO / "out" / "summary.json").read_text())["flight_time_s"]
+    flight = fly(read_mission(DEMO / "out" / name), ReplaySettings(speedup=200.0))
+    print(f"\n{name}: estimate {estimate:.1f} s, simulated flight {flight.sim_time_s:.1f} s")
+    assert len(flight.photos) == 12
+    assert abs(flight.sim_time_s - estimate) <= 0.1 * estimate
+
+
 def test_replay_verdict_agrees_with_the_independent_checker() -> None:
     """Each photo the replay names as seeing a target also sees it for tests/independent.py
     (its own raster reading, interpolation and geodesy)."""
@@ -429,3 +492,98 @@ def free_tcp_port() -> int:
         probe.bind(("127.0.0.1", 0))
         port: int = probe.getsockname()[1]
     return port
+
+
+# --- replay any plan: the camera and targets travel with it -----------------------------------
+
+PLAN = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
+# At the default 5 m/s the demo needs 3 sorties at 3.8 min.
+SORTIE_ENDURANCE = "3.8"
+
+
+@pytest.fixture(scope="module")
+def sorties(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("sorties")
+    args = [*PLAN, "--endurance", SORTIE_ENDURANCE, "--no-map", "--quiet", "--out", str(out)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.stderr
+    assert (out / "mission_2.plan").is_file()
+    return out
+
+
+def _replay(*args: str) -> Any:
+    return CliRunner().invoke(main, [*REPLAY, *args, "--speedup", "200"])
+
+
+def test_a_plan_at_another_camera_replays_without_fov(tmp_path: Path) -> None:
+    out = tmp_path / "fov40"
+    made = CliRunner().invoke(
+        main, [*PLAN, "--fov", "40", "--no-map", "--quiet", "--out", str(out)]
+    )
+    assert made.exit_code == 0, made.stderr
+    result = _replay("--plan", str(out / "mission.plan"))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "16 targets at camera ±40°, clearance 10 m (from mission.plan, sortie 1 of 1)" in (
+        result.output
+    )
+    assert "result    PASS" in result.output and result.stderr == ""
+
+
+def test_a_sortie_is_checked_on_its_own_targets(sorties: Path) -> None:
+    check = json.loads((sorties / "mission_2.plan").read_text())["urptGcs"]
+    names = {t["name"] for t in check["targets"]}
+    summary = json.loads((sorties / "summary.json").read_text())
+    assert names == {n for s in summary["stops"] if s["sortie"] == 2 for n in s["sees"]}
+    assert 0 < len(names) < summary["targets"]
+    result = _replay("--plan", str(sorties / "mission_2.plan"))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert f"targets   {len(names)} of {len(names)} seen" in result.output
+    assert "(from mission_2.plan, sortie 2 of 3)" in result.output
+
+
+def test_a_waypoints_file_is_checked_from_the_summary_beside_it(
+    sorties: Path, tmp_path: Path
+) -> None:
+    result = _replay("--plan", str(sorties / "mission_3.waypoints"), "--fov", "35")
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "(from summary.json for mission_3.waypoints, sortie 3 of 3)" in result.output
+    assert "camera ±35°" in result.output
+    assert result.stderr == (
+        "urpt-gcs: warning: --fov 35 deg overrides the 30 deg mission_3.waypoints was planned for\n"
+    )
+    # A summary of another plan does not describe the file: every target, and a warning.
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    (alone / "mission_3.waypoints").write_bytes((sorties / "mission_3.waypoints").read_bytes())
+    (alone / "summary.json").write_bytes((DEMO / "out" / "summary.json").read_bytes())
+    result = _replay("--plan", str(alone / "mission_3.waypoints"))
+    assert result.exit_code == 1
+    assert "does not describe mission_3.waypoints" in result.stderr
+    assert "from --fov and --min-clearance, every target of --targets" in result.output
+
+
+def test_sorties_replayed_together_see_every_target(sorties: Path) -> None:
+    result = _replay("--plan", str(sorties))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert result.output.count("result    PASS") == 4  # three sorties and all together
+    assert "together: 3 flights, 12 photos\n  targets   16 of 16 seen" in result.output
+    # Two of the three pass on their own, and together miss the third's targets.
+    result = _replay(
+        "--plan", str(sorties / "mission_1.plan"), "--plan", str(sorties / "mission_2.plan")
+    )
+    assert result.exit_code == 1
+    assert result.output.count("result    PASS") == 2
+    assert "photographed by none of the 2 flights" in result.stderr
+
+
+def test_a_bad_replay_key_is_one_line(sorties: Path, tmp_path: Path) -> None:
+    plan = json.loads((sorties / "mission_1.plan").read_text())
+    plan["urptGcs"]["targets"][0] = {"name": "T01", "lat": 95.0, "lon": 9.4}
+    bad = tmp_path / "bad.plan"
+    bad.write_text(json.dumps(plan))
+    result = _replay("--plan", str(bad))
+    assert result.exit_code == 1
+    assert result.stderr == (
+        f"urpt-gcs: error: {bad}: urptGcs: target 'T01' is not a WGS84 position: remove the "
+        "urptGcs key (replay then uses its flags) or plan again\n"
+    )

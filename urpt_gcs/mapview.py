@@ -1,4 +1,5 @@
-"""The plan on a map: hillshaded DSM, regions, targets, tour, home, scale bar and north arrow.
+"""The plan on a map: hillshaded DSM, regions, targets, the sorties as flown (each from home
+and back, in its own colour, stops numbered in flight order), home, scale bar and north arrow.
 
 Drawn with matplotlib's object API (no pyplot, no global state) in the planning CRS, so
 distances on the picture are metres on the ground.
@@ -19,7 +20,9 @@ from matplotlib.patches import FancyArrow
 from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.transforms import Affine2D
 
+from urpt_gcs.mission import waypoint_positions
 from urpt_gcs.planner import Plan
+from urpt_gcs.report import flown_stops, sortie_colour
 from urpt_gcs.terrain import WGS84, FloatArray
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.
@@ -43,6 +46,64 @@ def _hillshade(z: FloatArray, cell_m: float) -> FloatArray:
 
 def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
     """A PNG of the plan, for the operator to check at a glance."""
+    fig = map_figure(plan, data)
+    out = io.BytesIO()
+    fig.savefig(out, format="png")
+    return out.getvalue()
+
+
+def sortie_routes(plan: Plan, to_map: pyproj.Transformer) -> list[FloatArray]:
+    """Each sortie as flown, in the planning CRS: home, its missions' waypoints, home."""
+    routes = []
+    for mission in plan.missions:
+        home = (mission.home.lat_deg, mission.home.lon_deg)
+        lat, lon = np.array([home, *waypoint_positions(mission), home]).T
+        x, y = to_map.transform(lon, lat)
+        routes.append(np.column_stack([x, y]))
+    return routes
+
+
+def _draw_sorties(ax: Any, plan: Plan, to_map: pyproj.Transformer) -> list[FloatArray]:
+    """Each sortie's route in its colour, with the stops' order numbers; the routes drawn."""
+    routes = sortie_routes(plan, to_map)
+    stops = flown_stops(plan)
+    many = len(routes) > 1
+    for number, (route, sortie) in enumerate(zip(routes, plan.sorties, strict=True), start=1):
+        colour = sortie_colour(number)
+        label = (
+            f"sortie {number}: {sortie.stop - sortie.first} stops, {sortie.length_m:.0f} m, "
+            f"{sortie.flight_time_s / 60:.1f} min"
+            if many
+            else "tour"
+        )
+        ax.plot(route[:, 0], route[:, 1], "-", color="black", linewidth=2.4, zorder=7)
+        ax.plot(
+            route[:, 0],
+            route[:, 1],
+            "-",
+            color=colour,
+            linewidth=1.4,
+            zorder=8,
+            label=label,
+            gid=f"sortie {number}",
+        )
+        for stop, (x, y) in zip((s for s in stops if s.sortie == number), route[1:-1], strict=True):
+            ax.annotate(
+                str(stop.order),
+                (x, y),
+                ha="center",
+                va="center",
+                fontsize=7,
+                fontweight="bold",
+                zorder=10,
+                bbox={"boxstyle": "circle,pad=0.2", "fc": colour, "ec": "black", "lw": 0.8},
+            )
+    return routes
+
+
+def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
+    """The map as a matplotlib figure; each sortie's route is the line with gid
+    ``sortie N``."""
     terrain = plan.terrain
     step = max(1, math.ceil(max(terrain.elevation_m.shape) / _MAX_DISPLAY_PX))
     z = terrain.elevation_m[::step, ::step]
@@ -98,28 +159,13 @@ def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
             bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0},
         )
 
-    stops = plan.tour.points_xy
-    assert stops is not None
     hx, hy = plan.home_xy
-    path = np.vstack([[plan.home_xy], stops, [plan.home_xy]])
-    ax.plot(path[:, 0], path[:, 1], "-", color="black", linewidth=2.4, zorder=7)
-    ax.plot(path[:, 0], path[:, 1], "-", color="#ffd400", linewidth=1.4, zorder=8, label="tour")
-    for k, (x, y) in enumerate(stops, start=1):
-        ax.annotate(
-            str(k),
-            (x, y),
-            ha="center",
-            va="center",
-            fontsize=7,
-            fontweight="bold",
-            zorder=10,
-            bbox={"boxstyle": "circle,pad=0.2", "fc": "#ffd400", "ec": "black", "lw": 0.8},
-        )
+    to_map = pyproj.Transformer.from_crs(WGS84, plan.crs, always_xy=True)
+    paths = _draw_sorties(ax, plan, to_map)
     ax.scatter(
         [hx], [hy], marker="*", s=260, c="white", edgecolors="black", zorder=11, label="home"
     )
 
-    to_map = pyproj.Transformer.from_crs(WGS84, plan.crs, always_xy=True)
     fence_lat, fence_lon = zip(*plan.geofence_latlon, strict=True)
     fx, fy = to_map.transform(fence_lon, fence_lat)
     ax.add_patch(
@@ -135,7 +181,7 @@ def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
         )
     )
     everything = np.vstack(
-        [path, plan.targets_xy, np.column_stack([fx, fy])]
+        [*paths, plan.targets_xy, np.column_stack([fx, fy])]
         + [np.asarray(r.polygon.exterior.coords) for r in plan.regions if not r.polygon.is_empty]
     )
     lo, hi = everything.min(axis=0), everything.max(axis=0)
@@ -154,18 +200,18 @@ def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
         if data["gap_pct"] is not None
         else "no bound"
     )
+    count = len(data["sorties"])
+    sorties = f" in {count} sorties, each from home and back" if count > 1 else ""
     ax.set_title(
         f"{data['targets']} targets, {data['tour_stops']} stops, tour {data['tour_length_m']:.0f} m"
-        f" ({quality}), {data['flight_time_s'] / 60:.1f} min\n"
+        f" ({quality}), {data['flight_time_s'] / 60:.1f} min{sorties}\n"
         f"altitude {data['altitude_amsl_m']:.1f} m AMSL / {data['altitude_above_home_m']:.1f} m "
         f"above home, camera ±{data['fov_deg']:g}°, solver {data['solver']}",
         fontsize=10,
     )
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
     fig.tight_layout()
-    out = io.BytesIO()
-    fig.savefig(out, format="png")
-    return out.getvalue()
+    return fig
 
 
 def _scale_bar_and_north(ax: Any, lo: FloatArray, hi: FloatArray) -> None:

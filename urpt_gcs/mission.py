@@ -138,14 +138,19 @@ class Mission:
         return self.items
 
 
+# The one default cruise speed: the API's, the CLI's --speed, and a .waypoints file's without
+# a DO_CHANGE_SPEED.
+DEFAULT_SPEED_M_S = 5.0
+
+
 @dataclass(frozen=True, slots=True)
 class MissionSettings:
     """How the tour is flown and photographed."""
 
     firmware: Firmware = "ardupilot"
     hold_s: float = 2.0
-    cruise_speed_m_s: float = 8.0
-    hover_speed_m_s: float = 5.0
+    cruise_speed_m_s: float = DEFAULT_SPEED_M_S
+    hover_speed_m_s: float = DEFAULT_SPEED_M_S
 
     def __post_init__(self) -> None:
         if self.firmware not in FIRMWARES:
@@ -160,6 +165,20 @@ class MissionSettings:
         ):
             if not (math.isfinite(value) and 0.1 <= value <= 50.0):
                 raise SettingsError(f"{name} {value} m/s is out of range; use 0.1 to 50 m/s")
+
+
+def commanded_speed(items: Sequence[MissionItem]) -> float | None:
+    """The horizontal speed the first DO_CHANGE_SPEED of ``items`` sets, or None.
+
+    Speed types AIRSPEED and GROUNDSPEED set the horizontal speed on a multicopter (ArduCopter
+    ``ModeAuto::do_change_speed``; PX4 uses param2 whatever the type); a speed of 0 or less
+    changes nothing.
+    """
+    for item in items:
+        horizontal = item.params[0] in (mavlink.SPEED_TYPE_AIRSPEED, mavlink.SPEED_TYPE_GROUNDSPEED)
+        if item.command == mavlink.MAV_CMD_DO_CHANGE_SPEED and horizontal and item.params[1] > 0:
+            return item.params[1]
+    return None
 
 
 def waypoint_positions(mission: Mission) -> list[tuple[float, float]]:
@@ -205,6 +224,16 @@ def build_mission(
     items: list[MissionItem] = [
         _item(
             mavlink.MAV_CMD_NAV_TAKEOFF, rel, 0, 0, 0, 0, home.lat_deg, home.lon_deg, altitude_rel_m
+        ),
+        # Both firmwares run a "do" item once the navigation item before it completes: the
+        # speed applies from the first leg on, when the climb is done. Ground speed; throttle
+        # -1 is "no change" (ArduCopter ignores it, PX4 reads it only without a speed).
+        _item(
+            mavlink.MAV_CMD_DO_CHANGE_SPEED,
+            cmd_frame,
+            mavlink.SPEED_TYPE_GROUNDSPEED,
+            settings.cruise_speed_m_s,
+            -1,
         ),
     ]
     if settings.firmware == "ardupilot":

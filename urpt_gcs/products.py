@@ -2,7 +2,9 @@
 
 One sortie: ``mission.plan`` and ``mission.waypoints``; several: ``mission_1.plan``,
 ``mission_1.waypoints``, ``mission_2.plan``, ... Always ``summary.json``, ``plan.kml`` and
-``plan.geojson``, and ``map.png`` unless the caller asks for none.
+``plan.geojson``, and ``map.png`` unless the caller asks for none. Each ``.plan`` carries what
+its replay must check (:class:`~urpt_gcs.formats.qgc_plan.ReplayCheck`); a ``.waypoints`` has
+no room for it, and its replay reads ``summary.json`` beside it.
 
 ``--out`` holds one plan's files: a file of an earlier plan under one of these names
 (:data:`PRODUCT_NAMES`) that this plan does not write is removed with the rest of the earlier
@@ -18,9 +20,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from urpt_gcs.errors import OutputError
 from urpt_gcs.formats import plan_json, waypoints_text
 from urpt_gcs.formats.geo import plan_geojson, plan_kml
+from urpt_gcs.formats.qgc_plan import ReplayCheck
 from urpt_gcs.output import Destination, check_file, check_folder, commit
 from urpt_gcs.planner import Plan
 from urpt_gcs.report import summary
@@ -70,14 +75,35 @@ def check_extra(path: Path, flag: str, out: Destination) -> Destination:
     return folder
 
 
+def replay_checks(plan: Plan) -> list[ReplayCheck]:
+    """Per sortie, what its replay must check: the targets its stops see, at the planned
+    camera and clearance."""
+    targets = plan.targets.targets
+    checks = []
+    for number, sortie in enumerate(plan.sorties, start=1):
+        seen = plan.tour.sees[sortie.first : sortie.stop].any(axis=0)
+        checks.append(
+            ReplayCheck(
+                fov_deg=plan.camera.fov_deg,
+                min_clearance_m=plan.settings.min_clearance_m,
+                targets=tuple(targets[t] for t in np.flatnonzero(seen).tolist()),
+                sortie=number,
+                sorties=len(plan.sorties),
+            )
+        )
+    return checks
+
+
 def render_products(
     plan: Plan, out_dir: Path, with_map: bool = True
 ) -> tuple[dict[str, Any], dict[str, str | bytes]]:
     """Every output of ``plan`` in memory: the summary, and file name -> content."""
     files: dict[str, str | bytes] = {}
     fence = [(lat, lon) for lat, lon in plan.geofence_latlon]
-    for stem, mission in zip(mission_stems(plan), plan.missions, strict=True):
-        files[f"{stem}.plan"] = plan_json(mission, geofence=fence)
+    for stem, mission, check in zip(
+        mission_stems(plan), plan.missions, replay_checks(plan), strict=True
+    ):
+        files[f"{stem}.plan"] = plan_json(mission, geofence=fence, check=check)
         files[f"{stem}.waypoints"] = waypoints_text(mission)
     files["plan.kml"] = plan_kml(plan)
     files["plan.geojson"] = plan_geojson(plan)

@@ -125,7 +125,8 @@ _AP_STORED: dict[int, _Stored] = {
     mavlink.MAV_CMD_NAV_LAND: _Stored((_UINT16, _drop, _drop, _sign), True),
     mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: _Stored((_drop, _drop, _drop, _drop), False),
     mavlink.MAV_CMD_DO_MOUNT_CONTROL: _Stored((_f32, _f32, _f32, _drop), False),
-    mavlink.MAV_CMD_DO_CHANGE_SPEED: _Stored((_UINT8, _f32, _int8, _drop), False),
+    # speed_type uint8_t, target_ms and throttle_pct float (AP_Mission's Change_Speed_Command).
+    mavlink.MAV_CMD_DO_CHANGE_SPEED: _Stored((_UINT8, _f32, _f32, _drop), False),
     mavlink.MAV_CMD_DO_DIGICAM_CONTROL: _Stored(
         (_UINT8, _UINT8, _int8, _UINT8), False, x=_UINT8, y=_UINT8
     ),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -16,39 +17,90 @@ def _round(x: float, digits: int = 2) -> float | None:
     return round(x, digits) if math.isfinite(x) else None
 
 
+# Bright colours that stand apart on a grey hillshade and in Google Earth's imagery, one per
+# sortie in turn; the map, KML and GeoJSON share them.
+SORTIE_COLOURS = (
+    "#ffd400",
+    "#00b4ff",
+    "#ff3fa4",
+    "#5ce65c",
+    "#ff8c1a",
+    "#a77dff",
+    "#00e0c0",
+    "#ff4040",
+)
+
+
+def sortie_colour(number: int) -> str:
+    """The ``#rrggbb`` colour of sortie ``number`` (from 1)."""
+    return SORTIE_COLOURS[(number - 1) % len(SORTIE_COLOURS)]
+
+
+@dataclass(frozen=True, slots=True)
+class FlownStop:
+    """A stop as its sortie's mission flies it: the written waypoint, in flight order."""
+
+    order: int
+    sortie: int
+    lat_deg: float
+    lon_deg: float
+    sees: tuple[str, ...]
+    from_previous_m: float
+    eta_s: float
+
+
+def flown_stops(plan: Plan) -> list[FlownStop]:
+    """Every stop of every sortie with what it sees and when the copter gets there.
+
+    Positions are the missions' NAV_WAYPOINT items, so whatever draws them draws what is
+    flown; ``eta_s`` is from arming, on the plan's :class:`~urpt_gcs.safety.FlightModel`.
+    """
+    tour = plan.tour
+    assert tour.points_xy is not None
+    names = [t.name for t in plan.targets.targets]
+    model = plan.flight_model
+    waypoints = [latlon for m in plan.missions for latlon in _waypoint_items(m)]
+    stops = []
+    for number, sortie in enumerate(plan.sorties, start=1):
+        previous = np.asarray(plan.home_xy)
+        eta = model.takeoff_s(plan.altitude_rel_m)
+        for k in range(sortie.first, sortie.stop):
+            xy = tour.points_xy[k]
+            hop = float(np.hypot(*(xy - previous)))
+            eta += float(model.leg_s(hop))
+            stops.append(
+                FlownStop(
+                    order=k + 1,
+                    sortie=number,
+                    lat_deg=waypoints[k][0],
+                    lon_deg=waypoints[k][1],
+                    sees=tuple(names[t] for t in np.flatnonzero(tour.sees[k]).tolist()),
+                    from_previous_m=round(hop, 2),
+                    eta_s=round(eta, 1),
+                )
+            )
+            eta += model.hold_s
+            previous = xy
+    return stops
+
+
 def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
     """The plan's key figures; what ``summary.json`` holds."""
     tour = plan.tour
     inst = plan.instance
     names = [t.name for t in plan.targets.targets]
-    stops = []
-    assert tour.points_xy is not None
-    model = plan.flight_model
-    waypoints = [latlon for m in plan.missions for latlon in _waypoint_items(m)]
-    for number, sortie in enumerate(plan.sorties, start=1):
-        previous = np.asarray(plan.home_xy)
-        path = 0.0
-        for k in range(sortie.first, sortie.stop):
-            xy = tour.points_xy[k]
-            hop = float(np.hypot(*(xy - previous)))
-            path += hop
-            eta = (
-                plan.altitude_rel_m / model.climb_m_s
-                + path / model.cruise_m_s
-                + (k - sortie.first) * (model.hold_s + model.cruise_m_s / model.accel_m_s2)
-            )
-            stops.append(
-                {
-                    "order": k + 1,
-                    "sortie": number,
-                    "lat_deg": waypoints[k][0],
-                    "lon_deg": waypoints[k][1],
-                    "sees": [names[t] for t in np.flatnonzero(tour.sees[k]).tolist()],
-                    "from_previous_m": round(hop, 2),
-                    "eta_s": round(eta, 1),
-                }
-            )
-            previous = xy
+    stops = [
+        {
+            "order": stop.order,
+            "sortie": stop.sortie,
+            "lat_deg": stop.lat_deg,
+            "lon_deg": stop.lon_deg,
+            "sees": list(stop.sees),
+            "from_previous_m": stop.from_previous_m,
+            "eta_s": stop.eta_s,
+        }
+        for stop in flown_stops(plan)
+    ]
     sorties = [
         {
             "sortie": n,
@@ -97,6 +149,7 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
             "vertical_unit_declared": plan.dem.vertical_unit.declared,
             "planned_in_source_crs": plan.crs == plan.dem.horizontal_crs,
         },
+        "min_clearance_m": plan.settings.min_clearance_m,
         "min_leg_clearance_m": _round(
             min((leg.min_clearance_m for leg in plan.legs), default=math.nan)
         ),

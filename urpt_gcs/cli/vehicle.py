@@ -133,21 +133,26 @@ def sitl_group(
 )
 @click.option(
     "--plan",
-    "plan_file",
+    "plan_files",
     required=True,
+    multiple=True,
     type=click.Path(path_type=Path),
-    help="Mission to fly: .plan or .waypoints.",
+    help="Mission to fly: .plan or .waypoints, or a plan's --out folder (every sortie); "
+    "repeat for several sorties.",
 )
 @click.option("--speedup", type=float, default=50.0, show_default=True, help="Simulated s per s.")
 @click.option(
-    "--fov", type=float, default=30.0, show_default=True, help="Camera half-angle, degrees."
+    "--fov",
+    type=float,
+    default=None,
+    help="Camera half-angle, degrees [default: as planned (the .plan, or summary.json beside a "
+    ".waypoints), else 30].",
 )
 @click.option(
     "--min-clearance",
     type=float,
-    default=10.0,
-    show_default=True,
-    help="Least height above the terrain on cruise legs, m.",
+    default=None,
+    help="Least height above the terrain on cruise legs, m [default: as planned, else 10].",
 )
 @click.option(
     "--takeoff",
@@ -166,17 +171,21 @@ def sitl_group(
 def sitl_replay_command(
     dem: Path,
     targets: Path,
-    plan_file: Path,
+    plan_files: tuple[Path, ...],
     speedup: float,
-    fov: float,
-    min_clearance: float,
+    fov: float | None,
+    min_clearance: float | None,
     takeoff: str,
     timeout: float | None,
     connect: str | None,
 ) -> None:
-    """Fly a mission on the simulated copter via MAVSDK; check photos and clearance on the DEM."""
-    from urpt_gcs.sitl.judge import report_text
-    from urpt_gcs.sitl.replay import ReplaySettings, replay
+    """Fly a mission on the simulated copter via MAVSDK; check photos and clearance on the DEM.
+
+    Each sortie is checked on the targets it was planned to photograph; several sorties are
+    also checked together on every target of --targets.
+    """
+    from urpt_gcs.sitl.judge import report_text, set_report_text
+    from urpt_gcs.sitl.replay import ReplaySettings, mission_files, replay, replay_set
 
     progress = terminal_progress()
     try:
@@ -188,12 +197,23 @@ def sitl_replay_command(
             timeout_s=timeout,
             connect=connect,
         )
-        report = replay(dem, targets, plan_file, settings, progress)
+        files = mission_files(plan_files)
+        if len(files) == 1:
+            report = replay(dem, targets, files[0], settings, progress)
+            reports, text, ok = [report], report_text(report), report.ok
+            problems = list(report.problems)
+        else:
+            together = replay_set(dem, targets, files, settings, progress)
+            reports, text, ok = list(together.reports), set_report_text(together), together.ok
+            problems = [*together.problems]
+            problems += [f"{r.plan}: {p}" for r in together.reports for p in r.problems]
     except UrptError as exc:
         fail(exc)
         return
-    click.echo(report_text(report))
-    if not report.ok:
-        more = f" (and {len(report.problems) - 1} more)" if len(report.problems) > 1 else ""
-        click.echo(f"urpt-gcs: error: replay failed: {report.problems[0]}{more}", err=True)
+    for warning in (w for r in reports for w in r.expected.warnings):
+        click.echo(f"urpt-gcs: warning: {warning}", err=True)
+    click.echo(text)
+    if not ok:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        click.echo(f"urpt-gcs: error: replay failed: {problems[0]}{more}", err=True)
         sys.exit(1)

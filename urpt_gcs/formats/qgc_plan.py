@@ -4,6 +4,12 @@ The plan carries the mission items only; home travels as ``plannedHomePosition``
 and MAVSDK's importer put it back at seq 0 when the vehicle runs ArduPilot, so writing it as an
 item too would fly it twice.
 
+What a replay must check travels in the plan under the top-level key ``urptGcs``
+(:class:`ReplayCheck`): QGroundControl validates only the keys it knows at the top level of a
+plan (``PlanMasterController::loadFromFile``) and MAVSDK's importer reads only ``mission``,
+``geoFence`` and ``rallyPoints``, so both ignore it; a plan saved again from QGroundControl
+loses it, and replay then falls back to its flags.
+
 The readers of both formats share the helpers at the end of this module: they turn parsed
 values into a :class:`~urpt_gcs.mission.Mission` and every validation failure into a
 :class:`~urpt_gcs.errors.MissionFileError` naming the file.
@@ -14,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, TypeGuard
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -29,6 +36,7 @@ from urpt_gcs.mission import (
     count_problem,
     item_problem,
 )
+from urpt_gcs.targets import Target
 
 PLAN_FILE_VERSION = 1
 MISSION_VERSION = 2
@@ -53,11 +61,61 @@ ALTITUDE_MODE_OF_FRAME: dict[int, int] = {
     mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: 4,
 }
 
+# The top-level key QGroundControl and MAVSDK leave alone, and its layout's version.
+CHECK_KEY = "urptGcs"
+CHECK_VERSION = 1
+
 _SAVE_AS_PLAN = "save the mission from QGroundControl as a .plan file"
 _FIX_ITEM = "correct that item, or save the plan from QGroundControl again"
 
 
-def plan_json(mission: Mission, geofence: Sequence[tuple[float, float]] = ()) -> str:
+@dataclass(frozen=True, slots=True)
+class ReplayCheck:
+    """What a replay of one sortie's plan must check, as the plan was made.
+
+    Attributes
+    ----------
+    fov_deg
+        The camera half-angle from nadir the plan was made for.
+    min_clearance_m
+        The least height above the terrain the legs were planned to keep.
+    targets
+        The targets this sortie must photograph (names and WGS84 positions).
+    sortie, sorties
+        Which sortie of how many (1 of 1 for a plan in one flight).
+    """
+
+    fov_deg: float
+    min_clearance_m: float
+    targets: tuple[Target, ...]
+    sortie: int = 1
+    sorties: int = 1
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
+            raise SettingsError(f"camera half-angle {self.fov_deg} is outside (0, 90) degrees")
+        if not (math.isfinite(self.min_clearance_m) and self.min_clearance_m >= 0.0):
+            raise SettingsError(f"least clearance {self.min_clearance_m} must be 0 or more m")
+        if not 1 <= self.sortie <= self.sorties:
+            raise SettingsError(f"sortie {self.sortie} of {self.sorties} is not one of them")
+
+    def as_json(self) -> dict[str, Any]:
+        """The ``urptGcs`` value of a plan."""
+        return {
+            "version": CHECK_VERSION,
+            "sortie": self.sortie,
+            "sorties": self.sorties,
+            "fovDeg": self.fov_deg,
+            "minClearanceM": self.min_clearance_m,
+            "targets": [{"name": t.name, "lat": t.lat_deg, "lon": t.lon_deg} for t in self.targets],
+        }
+
+
+def plan_json(
+    mission: Mission,
+    geofence: Sequence[tuple[float, float]] = (),
+    check: ReplayCheck | None = None,
+) -> str:
     """Write a mission as a QGroundControl ``.plan`` file.
 
     Parameters
@@ -67,6 +125,8 @@ def plan_json(mission: Mission, geofence: Sequence[tuple[float, float]] = ()) ->
         ``plannedHomePosition`` (AMSL altitude).
     geofence
         Vertices (latitude, longitude) in degrees of one inclusion polygon, or empty for none.
+    check
+        What a replay of the file must check, written under ``urptGcs``; None for nothing.
 
     Returns
     -------
@@ -99,6 +159,8 @@ def plan_json(mission: Mission, geofence: Sequence[tuple[float, float]] = ()) ->
         "geoFence": {"version": GEOFENCE_VERSION, "polygons": polygons, "circles": []},
         "rallyPoints": {"version": RALLY_VERSION, "points": []},
     }
+    if check is not None:
+        plan[CHECK_KEY] = check.as_json()
     # allow_nan=False: NaN has already become null, and Infinity is not JSON.
     return json.dumps(plan, indent=4, allow_nan=False) + "\n"
 
@@ -202,6 +264,52 @@ def read_plan(text: str, source: str) -> Mission:
         cruise_speed_m_s=_speed(mission, "cruiseSpeed", source),
         hover_speed_m_s=_speed(mission, "hoverSpeed", source),
     )
+
+
+def read_replay_check(text: str, source: str) -> ReplayCheck | None:
+    """What a plan says its replay must check (its ``urptGcs`` key), or None without one.
+
+    Raises
+    ------
+    MissionFileError
+        If the key is there but not usable; the message names the file and the fix.
+    """
+    try:
+        root = json.loads(text.removeprefix("\ufeff"), parse_constant=_reject_constant)
+    except (ValueError, RecursionError):
+        return None  # read_plan says what is wrong with the file itself
+    if not isinstance(root, dict) or CHECK_KEY not in root:
+        return None
+    value = root[CHECK_KEY]
+    fix = f"remove the {CHECK_KEY} key (replay then uses its flags) or plan again"
+    where = f"{source}: {CHECK_KEY}"
+    if not isinstance(value, dict) or value.get("version") != CHECK_VERSION:
+        raise MissionFileError(f"{where} is not version {CHECK_VERSION} of urpt-gcs's: {fix}")
+    raw_targets = value.get("targets")
+    numbers = _numbers([value.get("fovDeg"), value.get("minClearanceM")])
+    sortie, sorties = value.get("sortie"), value.get("sorties")
+    if (
+        numbers is None
+        or None in numbers
+        or not isinstance(raw_targets, list)
+        or not (_is_int(sortie) and _is_int(sorties))
+    ):
+        raise MissionFileError(f"{where} lacks fovDeg, minClearanceM, sortie or targets: {fix}")
+    targets = []
+    for index, raw in enumerate(raw_targets):
+        place = _numbers([raw.get("lat"), raw.get("lon")]) if isinstance(raw, dict) else None
+        name = raw.get("name") if isinstance(raw, dict) else None
+        if place is None or None in place or not isinstance(name, str):
+            raise MissionFileError(f"{where}: target {index} is not a name, lat and lon: {fix}")
+        lat, lon = (n for n in place if n is not None)
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            raise MissionFileError(f"{where}: target {name!r} is not a WGS84 position: {fix}")
+        targets.append(Target(name, lat, lon))
+    fov, clearance = (n for n in numbers if n is not None)
+    try:
+        return ReplayCheck(fov, clearance, tuple(targets), sortie, sorties)
+    except SettingsError as exc:
+        raise MissionFileError(f"{where}: {exc}: {fix}") from None
 
 
 def _reject_constant(name: str) -> float:

@@ -20,12 +20,13 @@ from decimal import Decimal
 from urpt_gcs.errors import MissionFileError, SettingsError
 from urpt_gcs.formats.qgc_plan import assemble_mission, check_item, make_item, show
 from urpt_gcs.mission import (
+    DEFAULT_SPEED_M_S,
     FIRMWARES,
     Firmware,
     GeoPoint,
     Mission,
     MissionItem,
-    MissionSettings,
+    commanded_speed,
     count_problem,
 )
 
@@ -113,8 +114,8 @@ def read_waypoints(text: str, source: str, firmware: Firmware = "ardupilot") -> 
     Mission
         Home from the line of seq 0 (its x, y, z), the items from the lines after it (seq
         1, 2, ... in order; their ``current`` flags are not kept), the flight altitude from the
-        first takeoff relative to home (else the highest relative altitude). The format carries no
-        speeds: they are :class:`MissionSettings` defaults.
+        first takeoff relative to home (else the highest relative altitude). The format has no
+        speed fields: the speed is the first DO_CHANGE_SPEED's, else ``DEFAULT_SPEED_M_S``.
 
     Raises
     ------
@@ -151,19 +152,19 @@ def read_waypoints(text: str, source: str, firmware: Firmware = "ardupilot") -> 
             f"{source}: line {home_line} (home) is not usable: {exc}: set the home position "
             f"in Mission Planner and save again"
         ) from None
-    defaults = MissionSettings()
     items: list[MissionItem] = []
     for seq, (number, fields) in enumerate(rows[1:], start=1):
         item = _read_item(number, fields, source, seq)
         check_item(f"{source}: line {number}", item, home, firmware)
         items.append(item)
+    speed = commanded_speed(items) or DEFAULT_SPEED_M_S
     return assemble_mission(
         source,
         home=home,
         items=tuple(items),
         firmware=firmware,
-        cruise_speed_m_s=defaults.cruise_speed_m_s,
-        hover_speed_m_s=defaults.hover_speed_m_s,
+        cruise_speed_m_s=speed,
+        hover_speed_m_s=speed,
     )
 
 

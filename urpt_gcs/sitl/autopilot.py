@@ -63,17 +63,22 @@ def _target(vehicle: Vehicle, item: Item) -> tuple[float | None, float | None]:
 def _run_do(vehicle: Vehicle, item: Item) -> None:
     digicam = item.command == mavlink.MAV_CMD_DO_DIGICAM_CONTROL and item.x == 1
     capture = item.command == mavlink.MAV_CMD_IMAGE_START_CAPTURE and item.param3 >= 1
+    # Speed types 0 and 1 set the horizontal speed; 2 and 3 (climb, descent) are not simulated.
+    horizontal = item.param1 in (mavlink.SPEED_TYPE_AIRSPEED, mavlink.SPEED_TYPE_GROUNDSPEED)
     if digicam or capture:
         vehicle.take_photo()
-    elif item.command == mavlink.MAV_CMD_DO_CHANGE_SPEED and item.param2 > 0.0:
+    elif item.command == mavlink.MAV_CMD_DO_CHANGE_SPEED and item.param2 > 0.0 and horizontal:
         vehicle.speed_m_s = item.param2
 
 
 def rtl_steps(vehicle: Vehicle) -> list[Step]:
-    """ArduCopter RTL: climb to RTL_ALT (or keep a higher altitude), fly home, loiter, land."""
+    """ArduCopter RTL: climb to RTL_ALT (or keep a higher altitude), fly home at RTL_SPEED (or
+    WPNAV_SPEED), loiter, land."""
     params = vehicle.params
     alt = max(params["RTL_ALT"] / 100.0, vehicle.alt_m)
-    speed = params["RTL_SPEED"] / 100.0 or None
+    # ModeRTL::init sets the waypoint speed to RTL_SPEED, or WPNAV_SPEED when that is 0: a
+    # mission's DO_CHANGE_SPEED does not carry over into RTL.
+    speed = (params["RTL_SPEED"] or params["WPNAV_SPEED"]) / 100.0
     final = params["RTL_ALT_FINAL"] / 100.0
     steps = [
         Step(None, None, alt),

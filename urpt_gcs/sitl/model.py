@@ -4,9 +4,12 @@ No sockets here: :meth:`Vehicle.step` advances simulated time, the ``command``/`
 methods are what COMMAND_LONG and SET_MODE do, and what the vehicle has to say (status text,
 mission progress, photos) collects in :attr:`Vehicle.events` for the server to send.
 
-The copter flies straight lines at constant speed: horizontally at ``WPNAV_SPEED`` (or a
-DO_CHANGE_SPEED), climbing at ``WPNAV_SPEED_UP``, descending at ``WPNAV_SPEED_DN`` and, below
-``LAND_ALT_LOW``, at ``LAND_SPEED``; it reaches each waypoint exactly. Positions are metres
+The copter flies straight lines from rest to rest: horizontally it accelerates and brakes at
+``WPNAV_ACCEL`` with the mission's DO_CHANGE_SPEED (else ``WPNAV_SPEED``) between, and
+returns home at ``RTL_SPEED`` (else ``WPNAV_SPEED``: ArduCopter's RTL starts its waypoint
+controller afresh, whatever the mission set); vertically it climbs at ``WPNAV_SPEED_UP``
+and descends at ``WPNAV_SPEED_DN`` and, below ``LAND_ALT_LOW``, at ``LAND_SPEED``. It reaches
+each waypoint exactly. Positions are metres
 east/north of home on a sphere of the WGS84 equatorial radius, as ArduPilot's Location does.
 """
 
@@ -69,6 +72,7 @@ class Vehicle:
         self.mode = int(mavlink.COPTER_MODE_STABILIZE)
         self.east_m = self.north_m = self.alt_m = 0.0
         self.velocity = (0.0, 0.0, 0.0)  # east, north, up; m/s
+        self.ground_speed_m_s = 0.0
         self.auto_armed = False
         self.landed_for_s = 0.0
         self.speed_m_s: float | None = None
@@ -117,6 +121,10 @@ class Vehicle:
     def cruise_m_s(self) -> float:
         """Horizontal speed: DO_CHANGE_SPEED's, else WPNAV_SPEED."""
         return self.speed_m_s or self.params["WPNAV_SPEED"] / 100.0
+
+    def accel_m_s2(self) -> float:
+        """WPNAV_ACCEL in m/s/s."""
+        return self.params["WPNAV_ACCEL"] / 100.0
 
     def climb_m_s(self) -> float:
         """WPNAV_SPEED_UP in m/s."""
@@ -181,6 +189,8 @@ class Vehicle:
                 self.say("Auto: Missing Takeoff Cmd", mavlink.MAV_SEVERITY_CRITICAL)
                 return False
             self.mode = mode
+            # ModeAuto::init forgets an earlier DO_CHANGE_SPEED (desired_speed_override).
+            self.speed_m_s = None
             self._start_mission()
             return True
         if mode in HOVER_MODES | {mavlink.COPTER_MODE_RTL, mavlink.COPTER_MODE_LAND}:
@@ -311,14 +321,23 @@ class Vehicle:
         north = self.north_m if step.north_m is None else step.north_m
         de, dn = east - self.east_m, north - self.north_m
         distance = math.hypot(de, dn)
-        reach = (step.speed_m_s or self.cruise_m_s()) * dt_s
+        accel = self.accel_m_s2()
+        # Speed up to the cruise speed, and brake in time to stop on the point.
+        speed = min(
+            self.ground_speed_m_s + accel * dt_s,
+            step.speed_m_s or self.cruise_m_s(),
+            math.sqrt(2.0 * accel * distance),
+        )
+        reach = speed * dt_s
         if distance <= reach:
             ve, vn = de / dt_s, dn / dt_s
             self.east_m, self.north_m = east, north
+            self.ground_speed_m_s = 0.0
         else:
-            ve, vn = de / distance * reach / dt_s, dn / distance * reach / dt_s
+            ve, vn = de / distance * speed, dn / distance * speed
             self.east_m += de / distance * reach
             self.north_m += dn / distance * reach
+            self.ground_speed_m_s = speed
         dz = step.alt_m - self.alt_m
         rate = self.climb_m_s() if dz > 0 else self.descent_m_s(step.land)
         if step.land and distance > reach:

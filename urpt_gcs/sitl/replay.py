@@ -12,9 +12,10 @@ import asyncio
 import itertools
 import json
 import math
+import re
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -32,7 +33,7 @@ from urpt_gcs.inputs import MISSION_FILE_MAX_BYTES, read_capped
 from urpt_gcs.link import UploadReport, UploadSettings, upload_verified
 from urpt_gcs.mavsdk_link import MavsdkLink, connect
 from urpt_gcs.mission import Mission
-from urpt_gcs.sitl.judge import ReplayReport, judge
+from urpt_gcs.sitl.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sitl.params import AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE
 from urpt_gcs.sitl.server import SitlServer
 from urpt_gcs.sitl.settings import VehicleSettings
@@ -47,6 +48,7 @@ CONNECT_TIMEOUT_S = 10.0
 ARM_WAIT_S = 90.0
 ARM_RETRY_S = 2.0
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
+PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,9 +60,9 @@ class ReplaySettings:
     speedup
         Simulated seconds per wall second.
     fov_deg
-        Camera half-angle from nadir, as planned.
+        Camera half-angle from nadir; None: as the mission says it was planned, else 30.
     min_clearance_m
-        Least height above the terrain the cruise legs must keep.
+        Least height above the terrain the cruise legs must keep; None: as planned, else 10.
     takeoff
         ``auto-options``: set AUTO_OPTIONS bit 1 so AUTO takes off by itself; ``guided``:
         take off in GUIDED first, then switch to AUTO.
@@ -74,8 +76,8 @@ class ReplaySettings:
     """
 
     speedup: float = 50.0
-    fov_deg: float = 30.0
-    min_clearance_m: float = 10.0
+    fov_deg: float | None = None
+    min_clearance_m: float | None = None
     takeoff: TakeoffMethod = "auto-options"
     timeout_s: float | None = None
     position_rate_hz: float = 10.0
@@ -84,9 +86,13 @@ class ReplaySettings:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speedup) and 1.0 <= self.speedup <= 1000.0):
             raise SettingsError(f"--speedup {self.speedup} is out of range; use 1 to 1000")
-        if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
+        if self.fov_deg is not None and not (
+            math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0
+        ):
             raise SettingsError(f"--fov {self.fov_deg} is outside (0, 90) degrees")
-        if not (math.isfinite(self.min_clearance_m) and self.min_clearance_m >= 0.0):
+        if self.min_clearance_m is not None and not (
+            math.isfinite(self.min_clearance_m) and self.min_clearance_m >= 0.0
+        ):
             raise SettingsError(f"--min-clearance {self.min_clearance_m} must be 0 or more m")
         if self.takeoff not in ("auto-options", "guided"):
             raise SettingsError(f"--takeoff {self.takeoff!r}: use auto-options or guided")
@@ -271,7 +277,6 @@ async def _fly(
     watch = _Watch(link, await link.system.get_system_id())
     await watch.start()
     try:
-        await param.set_param_float("WPNAV_SPEED", float(mission.cruise_speed_m_s * 100.0))
         await telemetry.set_rate_position(settings.position_rate_hz)
         if settings.takeoff == "auto-options":
             await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
@@ -365,5 +370,44 @@ def replay(
     # Refuse a bad DEM or target file before flying, not after.
     open_dem(dem_path)
     read_targets(targets_path)
+    expected = expected_checks(plan_path, mission, settings.fov_deg, settings.min_clearance_m)
     flight = fly(mission, settings, progress)
-    return judge(flight, mission, dem_path, targets_path, settings, str(plan_path))
+    return judge(flight, mission, dem_path, targets_path, expected, str(plan_path))
+
+
+def mission_files(paths: Sequence[Path]) -> list[Path]:
+    """The mission files to replay: each file given, and for a folder its sorties'
+    ``mission*.plan`` (or, without any, its ``mission*.waypoints``) in sortie order.
+
+    Raises
+    ------
+    MissionFileError
+        If a folder holds no mission urpt-gcs wrote.
+    """
+    files: list[Path] = []
+    for path in paths:
+        if not path.is_dir():
+            files.append(path)
+            continue
+        found = sorted(path.glob("mission*.plan")) or sorted(path.glob("mission*.waypoints"))
+        found = [f for f in found if PLAN_STEM.fullmatch(f.stem)]
+        if not found:
+            raise MissionFileError(
+                f"--plan folder '{path}' holds no mission.plan or mission_N.plan: give the "
+                "--out folder of urpt-gcs plan, or the mission files"
+            )
+        files.extend(sorted(found, key=lambda f: int(f.stem.partition("_")[2] or 0)))
+    return files
+
+
+def replay_set(
+    dem_path: Path,
+    targets_path: Path,
+    plan_paths: Sequence[Path],
+    settings: ReplaySettings | None = None,
+    progress: Progress | None = None,
+) -> SetReport:
+    """Replay each mission file on its own simulator, judge each on its own targets, and all
+    of them together on every target of ``targets_path``."""
+    reports = [replay(dem_path, targets_path, p, settings, progress) for p in plan_paths]
+    return judge_set(reports, dem_path, targets_path)

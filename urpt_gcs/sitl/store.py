@@ -13,7 +13,8 @@ mission uses, so a read-back here differs from the upload exactly where ArduPilo
 * commands without a location come back in frame 0 with x, y, z zero unless they store them;
 * NaN is refused in params 1-4, except param4 of NAV_WAYPOINT, NAV_TAKEOFF and NAV_LAND;
 * NAV_WAYPOINT / NAV_TAKEOFF keep param1 as a whole number (uint16), drop params 2-4;
-  DO_MOUNT_CONTROL keeps params 1-3; DO_DIGICAM_CONTROL keeps params 1-4 and x, y as bytes;
+  DO_MOUNT_CONTROL keeps params 1-3; DO_CHANGE_SPEED param1 as a byte and params 2-3;
+  DO_DIGICAM_CONTROL keeps params 1-4 and x, y as bytes;
 * ``current`` always reads 0, ``autocontinue`` always 1.
 
 In PX4 mode items are stored and returned exactly as sent and there is no home item.
@@ -130,7 +131,8 @@ _PARAM_STORAGE: dict[int, tuple[ParamStore, ParamStore, ParamStore, ParamStore]]
     ),
     mavlink.MAV_CMD_NAV_LOITER_UNLIM: (_zero, _zero, lambda v: _uint(abs(v), 16), _zero),
     mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: (_zero, _zero, _zero, _zero),
-    mavlink.MAV_CMD_DO_CHANGE_SPEED: (lambda v: _uint(v, 8), _keep, _int8, _zero),
+    # Change_Speed_Command: speed_type uint8_t, target_ms and throttle_pct float.
+    mavlink.MAV_CMD_DO_CHANGE_SPEED: (lambda v: _uint(v, 8), _keep, _keep, _zero),
     mavlink.MAV_CMD_DO_SET_ROI: (lambda v: _uint(v, 16), _zero, _zero, _zero),
     mavlink.MAV_CMD_CONDITION_DELAY: (_keep, _zero, _zero, _zero),
     mavlink.MAV_CMD_DO_MOUNT_CONTROL: (_keep, _keep, _keep, _zero),
