@@ -417,11 +417,25 @@ def test_over_capacity_names_no_space() -> None:
 
 
 def test_refusal_after_boot_is_waited_out() -> None:
+    """ArduPilot's "Only 0 items are supported" while it boots is no capacity: it is waited
+    out, and costs no attempt."""
     mission = demo_mission()
+    messages: list[str] = []
     with simulated(mission, boot_s=2.5) as (server, url):
-        report = upload(mission, url, busy_wait_s=0.5)
+        report = upload(mission, url, retries=0, progress=messages.append)
         assert_holds(server, mission)
-    assert report.attempts >= 2
+    assert report.attempts == 1
+    assert "the vehicle is still starting: trying again in 0.5 s" in messages
+
+
+def test_a_vehicle_that_keeps_starting_is_named_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("urpt_gcs.link.STARTING_WAIT_S", 1.0)
+    mission = demo_mission()
+    with simulated(mission, boot_s=30.0) as (_server, url), pytest.raises(LinkError) as raised:
+        upload(mission, url)
+    message = str(raised.value)
+    assert "is still starting after 1 s" in message and "'ArduPilot Ready'" in message
+    assert "holds at most" not in message
 
 
 def _one_item_mission(item: MissionItem) -> Mission:
