@@ -109,8 +109,13 @@ def test_upload_command_prints_one_line() -> None:
     with simulated(demo_mission()) as (_server, url):
         result = CliRunner().invoke(main, ["upload", str(DEMO_PLAN), "--connect", url])
     assert result.exit_code == 0, result.stderr
-    assert result.output.startswith("uploaded 29 items to ")
-    assert "read back identical" in result.output
+    assert result.stdout.startswith("uploaded 29 items to ")
+    assert "read back identical" in result.stdout
+    # The simulated copter keeps no fences: the mission goes up alone, with a warning.
+    assert result.stderr == (
+        "urpt-gcs: warning: the vehicle refused the geofence (MAV_MISSION_UNSUPPORTED): it "
+        "flies the mission without the plan's fence; set one on the vehicle if it needs one\n"
+    )
 
 
 def test_no_vehicle_is_one_clear_line() -> None:
@@ -412,11 +417,25 @@ def test_over_capacity_names_no_space() -> None:
 
 
 def test_refusal_after_boot_is_waited_out() -> None:
+    """ArduPilot's "Only 0 items are supported" while it boots is no capacity: it is waited
+    out, and costs no attempt."""
     mission = demo_mission()
+    messages: list[str] = []
     with simulated(mission, boot_s=2.5) as (server, url):
-        report = upload(mission, url, busy_wait_s=0.5)
+        report = upload(mission, url, retries=0, progress=messages.append)
         assert_holds(server, mission)
-    assert report.attempts >= 2
+    assert report.attempts == 1
+    assert "the vehicle is still starting: trying again in 0.5 s" in messages
+
+
+def test_a_vehicle_that_keeps_starting_is_named_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("urpt_gcs.link.STARTING_WAIT_S", 1.0)
+    mission = demo_mission()
+    with simulated(mission, boot_s=30.0) as (_server, url), pytest.raises(LinkError) as raised:
+        upload(mission, url)
+    message = str(raised.value)
+    assert "is still starting after 1 s" in message and "'ArduPilot Ready'" in message
+    assert "holds at most" not in message
 
 
 def _one_item_mission(item: MissionItem) -> Mission:

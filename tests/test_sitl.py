@@ -166,7 +166,7 @@ def test_arming_in_auto_needs_auto_options_bit_0() -> None:
     vehicle = _loaded(demo_mission())
     assert vehicle.set_mode(COPTER_AUTO)
     assert vehicle.arm(0.0) == mavlink.MAV_RESULT_FAILED
-    assert Text(mavlink.MAV_SEVERITY_CRITICAL, "Arm: Mode not armable") in vehicle.events
+    assert Text(mavlink.MAV_SEVERITY_CRITICAL, "Arm: AUTO mode not armable") in vehicle.events
 
 
 @pytest.mark.parametrize("start", ["auto-options", "guided", "mission-start"])
@@ -586,4 +586,42 @@ def test_a_bad_replay_key_is_one_line(sorties: Path, tmp_path: Path) -> None:
     assert result.stderr == (
         f"urpt-gcs: error: {bad}: urptGcs: target 'T01' is not a WGS84 position: remove the "
         "urptGcs key (replay then uses its flags) or plan again\n"
+    )
+
+
+def test_brake_is_not_armable_as_on_arducopter() -> None:
+    vehicle = _loaded(demo_mission())
+    assert vehicle.set_mode(mavlink.COPTER_MODE_BRAKE)
+    assert vehicle.arm(0.0) == mavlink.MAV_RESULT_FAILED
+    assert Text(mavlink.MAV_SEVERITY_CRITICAL, "Arm: BRAKE mode not armable") in vehicle.events
+
+
+def test_two_replays_in_a_row_on_one_vehicle() -> None:
+    """After the first flight the copter is left in AUTO; the second must still arm (MAVSDK's
+    arm() would switch AUTO to BRAKE, where ArduCopter refuses)."""
+    from urpt_gcs.sitl.server import SitlServer
+
+    mission = demo_mission()
+    port = free_tcp_port()
+    vehicle = VehicleSettings(home=mission.home, speedup=200.0)
+    settings = ReplaySettings(speedup=200.0, connect=f"tcpout://127.0.0.1:{port}")
+    with SitlServer(vehicle, f"tcpin://127.0.0.1:{port}") as server:
+        flights = [fly(mission, settings), fly(mission, settings)]
+        assert server.vehicle.mode == COPTER_AUTO
+    for flight in flights:
+        assert len(flight.photos) == 12
+        # Arming to landing on the vehicle's clock; the demo flies about 310 s.
+        assert 250.0 < flight.sim_time_s < 400.0
+        assert flight.vehicle.describe() == (f"ArduPilot 4.6.0 (tcpout://127.0.0.1:{port})")
+
+
+def test_the_report_names_the_simulated_copter() -> None:
+    from urpt_gcs.sitl.judge import report_text
+
+    report = replay(
+        DEMO / "site.tif", DEMO / "targets.kml", DEMO_PLAN, ReplaySettings(speedup=200.0)
+    )
+    first = report_text(report).splitlines()[0]
+    assert first.endswith(
+        "on the simulated ArduCopter (urpt-gcs), which reports itself as ArduPilot 4.6.0"
     )

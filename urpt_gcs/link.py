@@ -11,6 +11,15 @@ The uploader is written against :class:`VehicleLink`; the real one is
 :class:`urpt_gcs.mavsdk_link.MavsdkLink`, loaded only when a link is opened.
 Errors are :class:`~urpt_gcs.errors.LinkError`; a refusal by the vehicle is
 :class:`MissionRejected`, which names the MISSION_ACK result (``MAV_MISSION_NO_SPACE``...).
+
+ArduPilot refuses every upload for a moment after boot with ``MAV_MISSION_NO_SPACE`` and
+"Only 0 items are supported" (its mission storage is not up yet): that is read as "still
+starting", waited out with a growing pause for up to :data:`STARTING_WAIT_S`, and not counted
+as a failed attempt.
+
+A plan's geofence goes up after the mission, as a fence mission read back and compared the
+same way (:func:`upload_fence_verified`). A vehicle that refuses fences altogether gets the
+mission alone and a warning; a fence it accepted but does not hold as sent is an error.
 """
 
 from __future__ import annotations
@@ -19,10 +28,11 @@ import asyncio
 import math
 import time
 from collections.abc import Callable, Coroutine, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Protocol
 
 from urpt_gcs.errors import LinkError, SettingsError
+from urpt_gcs.geofence import Geofence, compare_fence, fence_items
 from urpt_gcs.mission import (
     Firmware,
     GeoPoint,
@@ -35,6 +45,11 @@ from urpt_gcs.readback import WireItem, compare, wire_items
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
 READBACK_S_PER_ITEM = 1.0
+# A real ArduCopter SITL is ready about 2 s after its first client connects (0.15 s at 10x);
+# a board on a slow SD card can take several seconds more.
+STARTING_WAIT_S = 30.0
+STARTING_FIRST_PAUSE_S = 0.5
+STARTING_MAX_PAUSE_S = 4.0
 AutopilotKind = Literal["ardupilot", "px4", "unknown"]
 Progress = Callable[[str], None]
 _NAMES = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
@@ -44,7 +59,9 @@ class MissionRejected(LinkError):
     """The vehicle refused the mission.
 
     ``result`` is the MAV_MISSION_RESULT name, ``seq`` the item it refused (when known),
-    ``capacity`` the most items it holds (when it said so).
+    ``capacity`` the most items it holds (when it said so). ``starting`` is True for
+    ArduPilot's refusal while it boots ("Only 0 items are supported"), which says nothing of
+    its capacity.
     """
 
     def __init__(
@@ -53,11 +70,18 @@ class MissionRejected(LinkError):
         detail: str = "",
         capacity: int | None = None,
         seq: int | None = None,
+        *,
+        starting: bool = False,
     ) -> None:
         super().__init__(f"{result}{': ' + detail if detail else ''}")
         self.result = result
         self.capacity = capacity
         self.seq = seq
+        self.starting = starting
+
+
+class FenceRefused(MissionRejected):
+    """The vehicle does not take fences at all (it refused the fence mission outright)."""
 
 
 class LinkTimeout(LinkError):
@@ -129,6 +153,17 @@ class UploadReport:
     elapsed_s: float
     vehicle_home: GeoPoint | None
     warnings: tuple[str, ...] = field(default=())
+    fence: FenceReport | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class FenceReport:
+    """A verified geofence: the vehicle holds the fence, item for item."""
+
+    description: str
+    items: int
+    attempts: int
+    elapsed_s: float
 
 
 class VehicleLink(Protocol):
@@ -158,6 +193,25 @@ class VehicleLink(Protocol):
 
     async def cancel(self) -> None:
         """Abandon a transfer still running."""
+        ...
+
+
+class FenceLink(Protocol):
+    """What the fence upload needs from a connected vehicle."""
+
+    url: str
+
+    async def wait_connected(self, timeout_s: float) -> None:
+        """Return once the vehicle is heard; LinkError after ``timeout_s``."""
+        ...
+
+    async def upload_fence(self, items: Sequence[WireItem]) -> None:
+        """Send a fence mission; FenceRefused if the vehicle takes no fences, MissionRejected
+        for another refusal, LinkTimeout if it does not answer."""
+        ...
+
+    async def download_fence(self) -> list[WireItem]:
+        """Read the vehicle's fence back; LinkTimeout if it does not answer."""
         ...
 
 
@@ -214,9 +268,13 @@ async def upload_verified(
     attempts = settings.retries + 1
     problem = ""
     refusal: MissionRejected | None = None
-    for attempt in range(1, attempts + 1):
-        if attempt > 1:
+    starting = _Starting(link.url)
+    attempt = 0
+    while attempt < attempts:
+        attempt += 1
+        if attempt > 1 and not starting.waiting:
             say(f"retrying ({problem}): attempt {attempt} of {attempts}")
+        starting.waiting = False
         refusal = None
         try:
             got = await _attempt(link, items, settings, say)
@@ -224,6 +282,11 @@ async def upload_verified(
             problem = str(exc)
             continue
         except MissionRejected as exc:
+            if exc.starting:
+                # Not a failed attempt: the vehicle cannot take any mission yet.
+                attempt -= 1
+                await starting.pause(say)
+                continue
             _check_refusal(exc, link.url, items)
             refusal, problem = exc, f"the vehicle refused it with {exc}"
             if attempt < attempts:
@@ -249,7 +312,7 @@ async def upload_verified(
     if refusal is not None:
         cause = (
             f"it may have no room for {len(items)} items, or still be starting (ArduPilot "
-            "refuses uploads for about ten seconds after boot): wait and try again"
+            "refuses uploads for a few seconds after boot): wait and try again"
             if refusal.result == "MAV_MISSION_NO_SPACE"
             else "another ground station may be uploading to it: stop that and try again"
         )
@@ -261,6 +324,113 @@ async def upload_verified(
         f"mission not verified on {link.url} after {attempts} attempts: {problem}; the "
         "vehicle may hold a partial mission: do not fly it"
     )
+
+
+async def upload_fence_verified(
+    link: FenceLink,
+    fence: Geofence,
+    firmware: Firmware,
+    settings: UploadSettings | None = None,
+    progress: Progress | None = None,
+) -> FenceReport:
+    """Upload ``fence`` as a fence mission until a download reads it back equal.
+
+    Parameters
+    ----------
+    link
+        A connected vehicle.
+    fence
+        The zones; must not be empty.
+    firmware
+        Whose read-back normalisation to allow for (:func:`urpt_gcs.geofence.compare_fence`).
+    settings
+        Retries and timeouts; defaults if omitted.
+    progress
+        Called with a short message as the upload goes on.
+
+    Returns
+    -------
+    FenceReport
+        Only when the vehicle holds the fence.
+
+    Raises
+    ------
+    FenceRefused
+        If the vehicle does not take fences (the mission it holds is unaffected).
+    LinkError
+        If it refuses this fence, or no attempt ends in a matching read-back.
+    """
+    settings = settings or UploadSettings()
+    say = progress or (lambda _msg: None)
+    started = time.monotonic()
+    items = fence_items(fence)
+    attempts = settings.retries + 1
+    problem = ""
+    for attempt in range(1, attempts + 1):
+        say(
+            f"uploading the geofence ({fence.describe()})"
+            + (f" ({problem}): attempt {attempt} of {attempts}" if attempt > 1 else "")
+        )
+        await link.wait_connected(settings.timeout_s)
+        try:
+            await link.upload_fence(items)
+        except FenceRefused:
+            raise
+        except MissionRejected as exc:
+            if exc.result not in RETRYABLE:
+                raise MissionRejected(
+                    exc.result,
+                    f"the vehicle on {link.url} refused the geofence ({fence.describe()}): "
+                    "simplify the fence or check the vehicle's FENCE_* parameters",
+                ) from None
+            problem = f"the vehicle refused it with {exc}"
+            await asyncio.sleep(settings.busy_wait_s * attempt)
+            continue
+        except LinkTimeout as exc:
+            problem = str(exc)
+            continue
+        say("reading the geofence back")
+        try:
+            got = await link.download_fence()
+        except LinkTimeout as exc:
+            problem = str(exc)
+            continue
+        check = compare_fence(items, got, firmware)
+        if check.equal:
+            return FenceReport(fence.describe(), len(items), attempt, time.monotonic() - started)
+        more = f" (and {len(check.mismatches) - 1} more)" if len(check.mismatches) > 1 else ""
+        problem = f"fence read-back differs: {check.mismatches[0]}{more}"
+    raise LinkError(
+        f"geofence not verified on {link.url} after {attempts} attempts: {problem}; the "
+        "vehicle may hold a partial fence: do not fly until it is uploaded"
+    )
+
+
+class _Starting:
+    """Waits out ArduPilot's start-up refusals with a growing pause, up to STARTING_WAIT_S."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.waiting = False
+        self._since: float | None = None
+        self._pause_s = STARTING_FIRST_PAUSE_S
+
+    async def pause(self, say: Progress) -> None:
+        now = time.monotonic()
+        if self._since is None:
+            self._since = now
+        if now - self._since > STARTING_WAIT_S:
+            raise MissionRejected(
+                "MAV_MISSION_NO_SPACE",
+                f"the vehicle on {self.url} is still starting after {STARTING_WAIT_S:g} s (it "
+                "says 'Only 0 items are supported' until its mission storage is up): wait for "
+                "'ArduPilot Ready' and upload again",
+                starting=True,
+            )
+        self.waiting = True
+        say(f"the vehicle is still starting: trying again in {self._pause_s:g} s")
+        await asyncio.sleep(self._pause_s)
+        self._pause_s = min(self._pause_s * 2.0, STARTING_MAX_PAUSE_S)
 
 
 def refuse_unfit(mission: Mission) -> None:
@@ -409,6 +579,7 @@ async def upload_async(
     url: str = DEFAULT_URL,
     settings: UploadSettings | None = None,
     progress: Progress | None = None,
+    fence: Geofence | None = None,
 ) -> UploadReport:
     """:func:`upload` for a caller already inside an event loop."""
     settings = settings or UploadSettings()
@@ -418,7 +589,23 @@ async def upload_async(
 
     say(f"waiting for an autopilot on {url}")
     async with connect(url, settings.timeout_s) as link:
-        return await upload_verified(link, mission, settings, progress)
+        report = await upload_verified(link, mission, settings, progress)
+        if fence is None or fence.empty:
+            return report
+        try:
+            verified = await upload_fence_verified(
+                link, fence, mission.firmware, settings, progress
+            )
+        except FenceRefused as exc:
+            return replace(
+                report,
+                warnings=(
+                    *report.warnings,
+                    f"the vehicle refused the geofence ({exc.result}): it flies the mission "
+                    "without the plan's fence; set one on the vehicle if it needs one",
+                ),
+            )
+        return replace(report, fence=verified)
 
 
 def upload(
@@ -430,8 +617,9 @@ def upload(
     *,
     transfer_timeout_s: float = 30.0,
     busy_wait_s: float = 3.0,
+    fence: Geofence | None = None,
 ) -> UploadReport:
-    """Upload a mission and verify the vehicle's read-back.
+    """Upload a mission and verify the vehicle's read-back; then its geofence, if given.
 
     Parameters
     ----------
@@ -449,11 +637,15 @@ def upload(
         Called with a short message at each step.
     transfer_timeout_s, busy_wait_s
         See :class:`UploadSettings`.
+    fence
+        The plan's geofence, uploaded after the mission as a fence mission and read back
+        (:func:`upload_fence_verified`); None or empty for none.
 
     Returns
     -------
     UploadReport
-        Only when the read-back matches.
+        Only when the read-back matches; ``fence`` says whether the fence is verified, and a
+        warning says when the vehicle refused to take a fence at all.
 
     Raises
     ------
@@ -461,7 +653,7 @@ def upload(
         Before connecting, for a mission no vehicle should be given (:func:`refuse_unfit`).
     LinkError
         With a one-line reason: no vehicle, wrong firmware, a refusal naming the MISSION_ACK
-        result, or no verified read-back after every retry.
+        result, or no verified read-back (of the mission or the fence) after every retry.
     """
     settings = UploadSettings(retries, timeout_s, transfer_timeout_s, busy_wait_s)
-    return asyncio.run(upload_async(mission, url, settings, progress))
+    return asyncio.run(upload_async(mission, url, settings, progress, fence))

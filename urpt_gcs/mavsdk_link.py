@@ -34,9 +34,11 @@ from mavsdk.plugins.mission_raw import MissionPlan, MissionRawError, MissionRawR
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import LinkError
+from urpt_gcs.geofence import FENCE_TYPE
 from urpt_gcs.link import (
     DEFAULT_URL,
     AutopilotKind,
+    FenceRefused,
     LinkTimeout,
     MissionRejected,
     UploadUnconfirmed,
@@ -233,6 +235,50 @@ class MavsdkLink:
             ) from None
         return [_from_mavsdk(item) for item in got]
 
+    async def upload_fence(self, items: Sequence[WireItem]) -> None:
+        """Upload a fence mission (``mission_raw.upload_geofence``, items as given).
+
+        FenceRefused when the vehicle answers MAV_MISSION_UNSUPPORTED (it keeps no fences),
+        MissionRejected for another refusal, LinkTimeout when it does not answer.
+        """
+        acks: list[tuple[float, dict[str, Any]]] = []
+        texts: list[tuple[float, dict[str, Any]]] = []
+        watchers = [
+            asyncio.create_task(self._watch("MISSION_ACK", acks)),
+            asyncio.create_task(self._watch("STATUSTEXT", texts)),
+        ]
+        await asyncio.sleep(0)
+        self.set_transfer_timeout(UPLOAD_TIMEOUT_S)
+        try:
+            await self.mission.upload_geofence([_to_mavsdk(item) for item in items])
+        except MissionRawError as exc:
+            if exc.result == MissionRawResult.TIMEOUT:
+                raise LinkTimeout(f"no answer to the geofence upload on {self.url}") from None
+            await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
+            fence_acks = [(t, a) for t, a in acks if a.get("mission_type") == FENCE_TYPE]
+            refusal = _rejection(exc.result, fence_acks, texts, None)
+            if refusal.result == "MAV_MISSION_UNSUPPORTED":
+                raise FenceRefused(refusal.result, "the vehicle keeps no geofence") from None
+            raise refusal from None
+        finally:
+            self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
+            for watcher in watchers:
+                watcher.cancel()
+            await asyncio.gather(*watchers, return_exceptions=True)
+
+    async def download_fence(self) -> list[WireItem]:
+        """The vehicle's fence mission (``mission_raw.download_geofence``)."""
+        self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
+        try:
+            got = await self.mission.download_geofence()
+        except MissionRawError as exc:
+            if exc.result == MissionRawResult.TIMEOUT:
+                raise LinkTimeout(f"no answer to the geofence download on {self.url}") from None
+            raise LinkError(
+                f"the vehicle on {self.url} did not send its geofence back ({exc.result.name})"
+            ) from None
+        return [_from_mavsdk(item) for item in got]
+
     async def cancel(self) -> None:
         """Cancel an upload or download MAVSDK may still be running."""
         # Nothing may be running, which MAVSDK reports as an error: that is the wanted state.
@@ -276,6 +322,9 @@ def _rejection(
         if words[:1] == ["Only"] and words[2:5] == ["items", "are", "supported"]:
             capacity = int(words[1]) if words[1].isdigit() else None
             detail = " ".join(words)
+    if capacity == 0 and name == "MAV_MISSION_NO_SPACE":
+        # Its mission storage is not up yet (AP_Mission reports 0 until it is): no capacity.
+        return MissionRejected(name, f"{detail} (still starting)", seq=seq, starting=True)
     return MissionRejected(name, detail, capacity, seq)
 
 

@@ -19,6 +19,7 @@ import click
 
 from urpt_gcs import __version__
 from urpt_gcs.errors import SettingsError, UrptError
+from urpt_gcs.geofence import Geofence
 from urpt_gcs.mission import Mission
 
 INTERRUPTED_EXIT = 130  # 128 + SIGINT
@@ -95,14 +96,22 @@ class RootGroup(click.Group):
 
 
 def upload_and_report(
-    mission: Mission, url: str, retries: int, timeout_s: float, quiet: bool
+    mission: Mission,
+    url: str,
+    retries: int,
+    timeout_s: float,
+    quiet: bool,
+    fence: Geofence | None = None,
 ) -> None:
-    """Upload with a verified read-back; one line on success, exit 1 on failure."""
+    """Upload with a verified read-back (the mission, then its geofence if it has one); one
+    line each on success, exit 1 on failure."""
     from urpt_gcs.link import upload
 
     progress = terminal_progress()
     try:
-        report = upload(mission, url, retries=retries, timeout_s=timeout_s, progress=progress)
+        report = upload(
+            mission, url, retries=retries, timeout_s=timeout_s, progress=progress, fence=fence
+        )
     except UrptError as exc:
         fail(exc)
         return
@@ -114,6 +123,11 @@ def upload_and_report(
             f"uploaded {report.items} items to {report.url} ({report.autopilot}); read back "
             f"identical in {report.elapsed_s:.2f} s ({tries})"
         )
+        if report.fence is not None:
+            click.echo(
+                f"uploaded the geofence, {report.fence.description}: {report.fence.items} "
+                f"fence items read back identical in {report.fence.elapsed_s:.2f} s"
+            )
 
 
 def terminal_progress() -> Callable[[str], None] | None:

@@ -220,7 +220,10 @@ def plan_command(
                 "urpt-gcs upload after each landing",
                 err=True,
             )
-        upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json)
+        from urpt_gcs.geofence import Geofence
+
+        fence = Geofence.inclusion(result.geofence_latlon)
+        upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json, fence)
 
 
 @main.command("demo-site")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -36,15 +37,19 @@ from urpt_gcs.link import DEFAULT_URL
     help="Seconds to wait for the autopilot's heartbeat.",
 )
 def upload_command(mission_file: Path, connect: str, retries: int, timeout: float) -> None:
-    """Upload a .plan (or .waypoints, as ArduPilot) and verify the vehicle reads it back."""
-    from urpt_gcs.sitl.replay import read_mission
+    """Upload a .plan (or .waypoints, as ArduPilot) and verify the vehicle reads it back.
+
+    A .plan's geofence goes up after the mission, as a fence mission, and is read back too.
+    """
+    from urpt_gcs.sitl.replay import read_fence, read_mission
 
     try:
         mission = read_mission(mission_file, flag="urpt-gcs upload")
+        fence = read_fence(mission_file)
     except UrptError as exc:
         fail(exc)
         return
-    upload_and_report(mission, connect, retries, timeout, quiet=False)
+    upload_and_report(mission, connect, retries, timeout, quiet=False, fence=fence)
 
 
 @main.group("sitl", invoke_without_command=True)
@@ -168,6 +173,16 @@ def sitl_group(
     help="Fly on this vehicle (e.g. ArduPilot SITL, tcpout://127.0.0.1:5760) instead of the "
     "built-in simulator; give its --speedup.",
 )
+@click.option(
+    "--ardupilot",
+    "ardupilot",
+    is_flag=False,
+    flag_value="",
+    default=None,
+    metavar="PATH",
+    help="Start ArduCopter SITL (the arducopter binary or its folder; alone: "
+    "$URPT_ARDUPILOT) at the plan's home, fly on it, stop it.",
+)
 def sitl_replay_command(
     dem: Path,
     targets: Path,
@@ -178,17 +193,23 @@ def sitl_replay_command(
     takeoff: str,
     timeout: float | None,
     connect: str | None,
+    ardupilot: str | None,
 ) -> None:
-    """Fly a mission on the simulated copter via MAVSDK; check photos and clearance on the DEM.
+    """Fly a mission via MAVSDK on the simulated copter or ArduCopter SITL; check photos and
+    clearance on the DEM.
 
     Each sortie is checked on the targets it was planned to photograph; several sorties are
     also checked together on every target of --targets.
     """
+    from urpt_gcs.sitl.ardupilot_sitl import ENV_VAR, resolve_binary
     from urpt_gcs.sitl.judge import report_text, set_report_text
     from urpt_gcs.sitl.replay import ReplaySettings, mission_files, replay, replay_set
 
     progress = terminal_progress()
     try:
+        binary = None
+        if ardupilot is not None:
+            binary = resolve_binary(ardupilot or os.environ.get(ENV_VAR))
         settings = ReplaySettings(
             speedup=speedup,
             fov_deg=fov,
@@ -196,6 +217,7 @@ def sitl_replay_command(
             takeoff=takeoff,  # type: ignore[arg-type]  # click.Choice checked it
             timeout_s=timeout,
             connect=connect,
+            ardupilot=binary,
         )
         files = mission_files(plan_files)
         if len(files) == 1:

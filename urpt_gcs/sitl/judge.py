@@ -412,7 +412,7 @@ def report_text(report: ReplayReport) -> str:
     upload = flight.upload
     ratio = flight.sim_time_s / flight.wall_time_s if flight.wall_time_s > 0 else math.nan
     lines = [
-        f"replay of {report.plan} on the simulated ArduCopter",
+        f"replay of {report.plan} on {flight.vehicle.describe()}",
         f"  upload    {upload.items} items verified in {upload.elapsed_s:.2f} s "
         f"({upload.attempts} attempt{'s' if upload.attempts != 1 else ''})",
         f"  flight    {flight.sim_time_s:.1f} s simulated in {flight.wall_time_s:.1f} s wall "

@@ -42,10 +42,19 @@ HOVER_MODES = frozenset(
         mavlink.COPTER_MODE_GUIDED,
     }
 )
-NOT_ARMABLE = frozenset({mavlink.COPTER_MODE_RTL, mavlink.COPTER_MODE_LAND})
+# ArduCopter's modes whose allows_arming() is false (BRAKE: MAVSDK's "Hold" on a copter).
+NOT_ARMABLE = frozenset(
+    {mavlink.COPTER_MODE_RTL, mavlink.COPTER_MODE_LAND, mavlink.COPTER_MODE_BRAKE}
+)
 USER_TAKEOFF_MODES = frozenset(
     {mavlink.COPTER_MODE_GUIDED, mavlink.COPTER_MODE_LOITER, mavlink.COPTER_MODE_POSHOLD}
 )
+
+
+def mode_name(mode: int) -> str:
+    """ArduCopter's name for a custom mode, as its messages say it ("BRAKE")."""
+    entry = mavlink.enums["COPTER_MODE"].get(mode)
+    return entry.name.removeprefix("COPTER_MODE_") if entry is not None else str(mode)
 
 
 class Vehicle:
@@ -155,7 +164,7 @@ class Vehicle:
             self.say("PreArm: waiting for position estimate", mavlink.MAV_SEVERITY_CRITICAL)
             return int(mavlink.MAV_RESULT_FAILED)
         if self.mode in NOT_ARMABLE or (self.mode == mavlink.COPTER_MODE_AUTO and not auto_ok):
-            self.say("Arm: Mode not armable", mavlink.MAV_SEVERITY_CRITICAL)
+            self.say(f"Arm: {mode_name(self.mode)} mode not armable", mavlink.MAV_SEVERITY_CRITICAL)
             return int(mavlink.MAV_RESULT_FAILED)
         self.armed = True
         self.auto_armed = False

@@ -1,9 +1,17 @@
-"""Replay: fly a mission on the simulated copter through the real link code, then judge it.
+"""Replay: fly a mission on a copter through the real link code, then judge it.
 
-:func:`fly` starts the simulator in a thread on a free loopback port and drives it as a ground
-station would, through MAVSDK: the verified upload of :mod:`urpt_gcs.link`, parameters, arming,
-AUTO, and the telemetry the GCS receives (GLOBAL_POSITION_INT for the track, CAMERA_FEEDBACK
-for the photos). :func:`replay` then hands the flight to :mod:`urpt_gcs.sitl.judge`.
+:func:`fly` flies on one of three vehicles: the simulated copter, started in a thread on a
+free loopback port; ArduPilot's own ArduCopter SITL, started from ``--ardupilot PATH`` in a
+scratch folder (:mod:`urpt_gcs.sitl.ardupilot_sitl`); or any vehicle at ``--connect``. It
+drives the vehicle as a ground station would, through MAVSDK: the verified upload of
+:mod:`urpt_gcs.link`, parameters, GUIDED, arming, AUTO, and the telemetry the GCS receives
+(GLOBAL_POSITION_INT for the track, CAMERA_FEEDBACK for the photos). :func:`replay` then hands
+the flight to :mod:`urpt_gcs.sitl.judge`.
+
+The flight time is the vehicle's own clock (``time_boot_ms``) from arming to the disarm
+after landing. The copter is put in GUIDED before arming: after a mission ArduCopter stays in
+AUTO, where MAVSDK's ``arm()`` would first switch to Hold, which is BRAKE on a copter, a mode
+ArduCopter does not arm in.
 """
 
 from __future__ import annotations
@@ -21,14 +29,18 @@ from pathlib import Path
 from typing import Any, Literal
 
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.info import InfoAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from mavsdk.exceptions import MavsdkError
 from mavsdk.plugins.action import ActionError
+from mavsdk.plugins.info import InfoError, Version
+from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.formats import read_plan, read_waypoints
+from urpt_gcs.geofence import Geofence, read_plan_geofence
 from urpt_gcs.inputs import MISSION_FILE_MAX_BYTES, read_capped
 from urpt_gcs.link import UploadReport, UploadSettings, upload_verified
 from urpt_gcs.mavsdk_link import MavsdkLink, connect
@@ -49,6 +61,13 @@ ARM_WAIT_S = 90.0
 ARM_RETRY_S = 2.0
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
+# ArduCopter arms in GUIDED once it has a position, and AUTO can take off from it.
+ARMING_MODE = mavlink.COPTER_MODE_GUIDED
+# MAVSDK asks for AUTOPILOT_VERSION itself on connecting; give the answer this long to come.
+VERSION_WAIT_S = 5.0
+SIMULATED = "the simulated ArduCopter (urpt-gcs)"
+# The vehicle's words on why it does not arm ("PreArm: ...", "Arm: ...").
+ARMING_TEXT_PREFIXES = ("PreArm:", "Arm:")
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +92,9 @@ class ReplaySettings:
     connect
         Fly on the vehicle at this MAVSDK connection string (an ArduPilot SITL) instead of
         starting the simulator; ``speedup`` should then be the SITL's.
+    ardupilot
+        Start ArduPilot's ArduCopter SITL from this binary (or its folder) at the plan's home
+        with ``speedup``, fly on it and stop it again, instead of the simulator.
     """
 
     speedup: float = 50.0
@@ -82,6 +104,7 @@ class ReplaySettings:
     timeout_s: float | None = None
     position_rate_hz: float = 10.0
     connect: str | None = None
+    ardupilot: Path | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speedup) and 1.0 <= self.speedup <= 1000.0):
@@ -102,6 +125,11 @@ class ReplaySettings:
             raise SettingsError(f"--timeout {self.timeout_s} s must be positive")
         if not (math.isfinite(self.position_rate_hz) and 0.5 <= self.position_rate_hz <= 50.0):
             raise SettingsError(f"position rate {self.position_rate_hz} Hz: use 0.5 to 50")
+        if self.connect is not None and self.ardupilot is not None:
+            raise SettingsError(
+                "--connect and --ardupilot both name the vehicle: give one (--ardupilot starts "
+                "the SITL itself)"
+            )
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,14 +154,38 @@ class TrackPoint:
 
 
 @dataclass(frozen=True, slots=True)
+class VehicleIdentity:
+    """Which vehicle flew: its autopilot and version (AUTOPILOT_VERSION) and where it ran.
+
+    ``version`` is empty when the vehicle did not say.
+    """
+
+    autopilot: str
+    version: str
+    where: str
+
+    def describe(self) -> str:
+        """E.g. "ArduPilot 4.7.0-dev (ArduCopter SITL, pid 1234)"."""
+        name = f"{self.autopilot} {self.version}".strip()
+        if self.where == SIMULATED:
+            return f"{SIMULATED}, which reports itself as {name}"
+        return f"{name} ({self.where})"
+
+
+@dataclass(frozen=True, slots=True)
 class Flight:
-    """What the ground station saw of one flight."""
+    """What the ground station saw of one flight.
+
+    ``sim_time_s`` is the vehicle's clock from arming to the disarm after landing,
+    ``wall_time_s`` the wall clock over the same span.
+    """
 
     upload: UploadReport
     photos: tuple[PhotoFix, ...]
     track: tuple[TrackPoint, ...]
     sim_time_s: float
     wall_time_s: float
+    vehicle: VehicleIdentity
 
 
 def read_mission(path: Path, flag: str = "--plan") -> Mission:
@@ -160,6 +212,21 @@ def read_mission(path: Path, flag: str = "--plan") -> Mission:
     raise MissionFileError(
         f"'{path}' is neither a .plan nor a .waypoints file: give the mission urpt-gcs plan wrote"
     )
+
+
+def read_fence(path: Path) -> Geofence:
+    """The geofence of a ``.plan`` file; empty for a ``.waypoints`` file, which has none."""
+    if path.suffix.lower() != ".plan":
+        return Geofence()
+    data = read_capped(
+        path,
+        "mission file",
+        "--plan",
+        MissionFileError,
+        MISSION_FILE_MAX_BYTES,
+        "give the mission urpt-gcs plan wrote",
+    )
+    return read_plan_geofence(data.decode("utf-8", errors="replace"), str(path))
 
 
 def free_udp_port() -> int:
@@ -199,11 +266,15 @@ class _Watch:
         self.system_id = system_id
         self.track: list[TrackPoint] = []
         self.photos: list[PhotoFix] = []
+        self.texts: list[str] = []
         self.armed = False
-        self.was_armed = False
+        self.mode: int | None = None
         self.armed_at_s: float | None = None
+        self.armed_at_wall: float | None = None
         self.disarmed_at_s: float | None = None
+        self.disarmed_at_wall: float | None = None
         self.disarmed = asyncio.Event()
+        self._arm_unclocked = False
         self._tasks: list[asyncio.Task[None]] = []
 
     async def _follow(self, name: str, handle: Callable[[dict[str, Any]], None]) -> None:
@@ -215,18 +286,17 @@ class _Watch:
         finally:
             await messages.aclose()
 
-    def _now_s(self) -> float:
-        return self.track[-1].time_s if self.track else 0.0
-
     def _position(self, fields: dict[str, Any]) -> None:
-        self.track.append(
-            TrackPoint(
-                fields["time_boot_ms"] / 1000.0,
-                fields["lat"] * 1e-7,
-                fields["lon"] * 1e-7,
-                fields["relative_alt"] / 1000.0,
-            )
+        point = TrackPoint(
+            fields["time_boot_ms"] / 1000.0,
+            fields["lat"] * 1e-7,
+            fields["lon"] * 1e-7,
+            fields["relative_alt"] / 1000.0,
         )
+        self.track.append(point)
+        if self._arm_unclocked:
+            # Armed before any position came: the first fix after it is the nearest clock.
+            self.armed_at_s, self._arm_unclocked = point.time_s, False
 
     def _photo(self, fields: dict[str, Any]) -> None:
         self.photos.append(
@@ -239,20 +309,32 @@ class _Watch:
             )
         )
 
+    def _text(self, fields: dict[str, Any]) -> None:
+        self.texts.append(str(fields.get("text", "")).rstrip("\0"))
+
     def _heartbeat(self, fields: dict[str, Any]) -> None:
         armed = bool(fields["base_mode"] & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-        if armed and not self.armed:
-            self.was_armed, self.armed_at_s = True, self._now_s()
-        if self.was_armed and self.armed and not armed:
-            self.disarmed_at_s = self._now_s()
+        self.mode = int(fields["custom_mode"])
+        now = self.track[-1].time_s if self.track else None
+        if armed and not self.armed and self.armed_at_s is None:
+            self.armed_at_s, self.armed_at_wall = now, time.monotonic()
+            self._arm_unclocked = now is None
+        if self.armed and not armed and self.armed_at_wall is not None:
+            self.disarmed_at_s, self.disarmed_at_wall = now, time.monotonic()
             self.disarmed.set()
         self.armed = armed
 
+    def arming_words(self) -> str:
+        """The vehicle's last words on arming, or ''."""
+        said = [t for t in self.texts if t.startswith(ARMING_TEXT_PREFIXES)]
+        return said[-1] if said else ""
+
     async def start(self) -> None:
-        """Subscribe to position, camera feedback and heartbeat."""
+        """Subscribe to position, camera feedback, status text and heartbeat."""
         for name, handle in (
             ("GLOBAL_POSITION_INT", self._position),
             ("CAMERA_FEEDBACK", self._photo),
+            ("STATUSTEXT", self._text),
             ("HEARTBEAT", self._heartbeat),
         ):
             self._tasks.append(asyncio.create_task(self._follow(name, handle)))
@@ -265,10 +347,49 @@ class _Watch:
         await asyncio.gather(*self._tasks, return_exceptions=True)
 
 
+async def identify(link: MavsdkLink, where: str) -> VehicleIdentity:
+    """The autopilot (HEARTBEAT) and its version (AUTOPILOT_VERSION, through MAVSDK's Info)."""
+    names = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
+    autopilot = names[await link.autopilot()]
+    info = InfoAsync(link.system)
+    version = ""
+    deadline = time.monotonic() + VERSION_WAIT_S
+    try:
+        while True:
+            try:
+                version = _version_text(await info.get_version())
+                break
+            except InfoError:
+                if time.monotonic() > deadline:
+                    break
+                await asyncio.sleep(0.2)
+    finally:
+        info.destroy()
+    return VehicleIdentity(autopilot, version, where)
+
+
+def _version_text(version: Version) -> str:
+    kinds = Version.FlightSoftwareVersionType
+    suffix = {
+        kinds.DEV: "-dev",
+        kinds.ALPHA: "-alpha",
+        kinds.BETA: "-beta",
+        kinds.RC: "-rc",
+    }.get(version.flight_sw_version_type, "")
+    number = f"{version.flight_sw_major}.{version.flight_sw_minor}.{version.flight_sw_patch}"
+    return "" if number == "0.0.0" else number + suffix
+
+
 async def _fly(
-    link: MavsdkLink, mission: Mission, settings: ReplaySettings, timeout_s: float, say: Progress
+    link: MavsdkLink,
+    mission: Mission,
+    settings: ReplaySettings,
+    timeout_s: float,
+    say: Progress,
+    where: str,
 ) -> Flight:
     upload = await upload_verified(link, mission, UploadSettings(), say)
+    vehicle = await identify(link, where)
     param, telemetry, action = (
         ParamAsync(link.system),
         TelemetryAsync(link.system),
@@ -281,8 +402,7 @@ async def _fly(
         if settings.takeoff == "auto-options":
             await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
         say("arming")
-        started = time.monotonic()
-        await _arm_when_ready(action, ARM_WAIT_S)
+        await _arm_when_ready(link, action, watch, ARM_WAIT_S)
         if settings.takeoff == "guided":
             await action.set_takeoff_altitude(GUIDED_TAKEOFF_M)
             await action.takeoff()
@@ -293,36 +413,76 @@ async def _fly(
         await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
     except asyncio.TimeoutError:
         raise LinkError(
-            f"the simulated vehicle did not land within {timeout_s:.0f} s of wall time"
+            f"{vehicle.describe()} did not land within {timeout_s:.0f} s of wall time"
         ) from None
     except MavsdkError as exc:
-        raise LinkError(f"the simulated vehicle refused a step of the flight: {exc}") from None
+        words = watch.arming_words() or (watch.texts[-1] if watch.texts else "")
+        raise LinkError(
+            f"{vehicle.describe()} refused a step of the flight: {exc}"
+            + (f" (it said '{words}')" if words else "")
+        ) from None
     finally:
         await watch.stop()
         for plugin in (param, telemetry, action):
             plugin.destroy()
     sim_s = (watch.disarmed_at_s or 0.0) - (watch.armed_at_s or 0.0)
-    return Flight(
-        upload, tuple(watch.photos), tuple(watch.track), sim_s, time.monotonic() - started
-    )
+    wall_s = (watch.disarmed_at_wall or 0.0) - (watch.armed_at_wall or 0.0)
+    return Flight(upload, tuple(watch.photos), tuple(watch.track), sim_s, wall_s, vehicle)
 
 
-async def _arm_when_ready(action: ActionAsync, wait_s: float) -> None:
-    """Arm; a real SITL refuses until its position estimate is good, so ask again."""
+async def _set_mode(link: MavsdkLink, mode: int) -> bool:
+    """MAV_CMD_DO_SET_MODE with an ArduCopter custom mode; True if the vehicle accepted it."""
+    fields = {
+        "target_system": await link.system.get_system_id(),
+        "target_component": AUTOPILOT,
+        "command": mavlink.MAV_CMD_DO_SET_MODE,
+        "confirmation": 0,
+        "param1": float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED),
+        "param2": float(mode),
+        "param3": 0.0,
+        "param4": 0.0,
+        "param5": 0.0,
+        "param6": 0.0,
+        "param7": 0.0,
+    }
+    command = MavlinkMessage(message_name="COMMAND_LONG", fields_json=json.dumps(fields))
+    try:
+        ack = await link.direct.send_command(command)
+    except MavsdkError:
+        return False
+    result = json.loads(ack.fields_json or "{}").get("result")
+    return bool(result == mavlink.MAV_RESULT_ACCEPTED)
+
+
+async def _arm_when_ready(
+    link: MavsdkLink, action: ActionAsync, watch: _Watch, wait_s: float
+) -> None:
+    """Put the copter in GUIDED and arm; a real SITL refuses until its position estimate is
+    good, so ask again. The vehicle's own "PreArm:"/"Arm:" words go into the error."""
     deadline = time.monotonic() + wait_s
+    problem = ""
     while True:
-        try:
-            await action.arm()
-            return
-        except ActionError as exc:
-            if time.monotonic() > deadline:
-                raise LinkError(f"the vehicle refused to arm for {wait_s:g} s ({exc})") from None
+        if watch.mode != ARMING_MODE and not await _set_mode(link, ARMING_MODE):
+            problem = "it did not switch to GUIDED"
+        else:
+            try:
+                await action.arm()
+                return
+            except ActionError as exc:
+                problem = exc.result.name
+        if time.monotonic() > deadline:
+            words = watch.arming_words()
+            raise LinkError(
+                f"the vehicle on {link.url} refused to arm for {wait_s:g} s ({problem}"
+                + (f"; it said '{words}'" if words else "")
+                + "): check its pre-arm checks"
+            ) from None
         await asyncio.sleep(ARM_RETRY_S)
 
 
 def fly(mission: Mission, settings: ReplaySettings, progress: Progress | None = None) -> Flight:
-    """Fly ``mission`` on a simulated ArduCopter started for the purpose, or on the vehicle
-    at ``settings.connect`` (an ArduPilot SITL) if given.
+    """Fly ``mission`` on a simulated ArduCopter started for the purpose, on ArduCopter SITL
+    started from ``settings.ardupilot``, or on the vehicle at ``settings.connect``.
 
     Raises
     ------
@@ -336,18 +496,25 @@ def fly(mission: Mission, settings: ReplaySettings, progress: Progress | None = 
     say = progress or (lambda _msg: None)
     timeout_s = settings.timeout_s or estimate_wall_timeout_s(mission, settings)
 
-    async def run(url: str) -> Flight:
+    async def run(url: str, where: str) -> Flight:
         async with connect(url, CONNECT_TIMEOUT_S) as link:
-            return await _fly(link, mission, settings, timeout_s, say)
+            return await _fly(link, mission, settings, timeout_s, say, where)
 
     if settings.connect is not None:
         say(f"flying on the vehicle at {settings.connect}")
-        return asyncio.run(run(settings.connect))
+        return asyncio.run(run(settings.connect, settings.connect))
+    if settings.ardupilot is not None:
+        from urpt_gcs.sitl.ardupilot_sitl import launch
+
+        say(f"starting ArduCopter SITL from {settings.ardupilot} (speed-up {settings.speedup:g}x)")
+        with launch(settings.ardupilot, mission.home, settings.speedup) as sitl:
+            where = f"ArduCopter SITL, pid {sitl.pid}, instance {sitl.instance}"
+            return asyncio.run(run(sitl.url, where))
     port = free_udp_port()
     vehicle = VehicleSettings(home=mission.home, speedup=settings.speedup)
     say(f"starting the simulated ArduCopter (speed-up {settings.speedup:g}x)")
     with SitlServer(vehicle, f"udpout://127.0.0.1:{port}"):
-        return asyncio.run(run(f"udpin://127.0.0.1:{port}"))
+        return asyncio.run(run(f"udpin://127.0.0.1:{port}", SIMULATED))
 
 
 def replay(

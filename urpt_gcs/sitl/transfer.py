@@ -153,7 +153,11 @@ class MissionTransfer:
                 ),
             ]
         if not self.ready(now):
-            return [self._ack(sysid, compid, mavlink.MAV_MISSION_NO_SPACE)]
+            # ArduPilot's mission storage reports 0 items until it is up.
+            return [
+                self._ack(sysid, compid, mavlink.MAV_MISSION_NO_SPACE),
+                self._text(mavlink.MAV_SEVERITY_WARNING, "Only 0 items are supported"),
+            ]
         self.store.truncate(msg.count)
         if msg.count == 0:
             return [self._ack(sysid, compid, mavlink.MAV_MISSION_ACCEPTED)]
