@@ -198,7 +198,7 @@ def test_upload_sends_the_geofence_and_it_reads_back(sitl: RunningSitl) -> None:
     assert result.exit_code == 0, result.output
     assert result.stderr == ""
     mission_line, fence_line = result.stdout.splitlines()
-    assert mission_line.startswith(f"uploaded 28 items to {sitl.url} (ardupilot)")
+    assert mission_line.startswith(f"uploaded 29 items to {sitl.url} (ardupilot)")
     assert fence_line.startswith(
         "uploaded the geofence, inclusion polygon (23 vertices): 23 fence items read back identical"
     )
@@ -317,7 +317,7 @@ def test_upload_through_a_relay_dropping_20_percent_each_way(sitl: RunningSitl) 
         report = upload(mission, f"tcpout://127.0.0.1:{relay.port}", timeout_s=20.0)
     finally:
         relay.close()
-    assert report.items == 28
+    assert report.items == 29
     dropped = sum(relay.dropped) / max(sum(relay.dropped) + sum(relay.passed), 1)
     print(
         f"\nupload at 20 % loss each way: verified in {report.elapsed_s:.1f} s, "
