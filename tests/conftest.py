@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -14,6 +15,8 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REAL_DEMS = SHARED / "dem"
 DEMO = REPO / "missions" / "demo"
+# What `plan` prints on stderr as each stage ends when stderr is no terminal.
+STAGE_LINE = re.compile(r"\.\.\. .+: \d+\.\d\d s")
 
 WriteDem = Callable[..., Path]
 
