@@ -106,7 +106,7 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
     type=float,
     default=5.0,
     show_default=True,
-    help="Seconds the solver may search.",
+    help="Seconds the solve stage may take (compiling the solver on first use aside).",
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
