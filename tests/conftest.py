@@ -15,6 +15,7 @@ with a one-line reason where the folder is absent, rather than failing::
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -29,6 +30,8 @@ REAL_DEMS = SHARED / "dem"
 GTSPLIB = SHARED / "bench" / "gtsplib"
 CETSP = SHARED / "bench" / "cetsp"
 DEMO = REPO / "missions" / "demo"
+# What `plan` prints on stderr as each stage ends when stderr is no terminal.
+STAGE_LINE = re.compile(r"\.\.\. .+: \d+\.\d\d s")
 
 
 def needs_shared(path: str | Path) -> pytest.MarkDecorator:

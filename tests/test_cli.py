@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import io
 import json
+import time
 from pathlib import Path
 
 import numpy as np
 import pyproj
 import pytest
 from click.testing import CliRunner
-from conftest import WriteDem
+from conftest import STAGE_LINE, WriteDem
 
 from urpt_gcs.cli import main
 
@@ -47,8 +49,9 @@ def _run(args: list[str]):
 
 def _assert_clean_failure(result, out: Path, *words: str) -> None:
     assert result.exit_code == 1, result.output
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
+    everything = result.stderr.strip().splitlines()
+    lines = [line for line in everything if not STAGE_LINE.fullmatch(line)]
+    assert len(lines) == 1 and everything[-1] == lines[0], result.stderr
     assert lines[0].startswith("urpt-gcs: error: ")
     assert "Traceback" not in result.stderr
     for word in words:
@@ -290,19 +293,114 @@ def test_unwritable_output_leaves_nothing(site: dict[str, Path]) -> None:
 
 
 def test_stage_progress_ticks_only_for_slow_stages() -> None:
-    import io
-    import time
-
     from urpt_gcs.progress import StageProgress
 
     stream = io.StringIO()
-    with StageProgress(stream, time_limit_s=2.0) as progress:
+    with StageProgress(stream, time_limit_s=2.0, live=True) as progress:
         progress("reading targets")  # fast: nothing shown
         progress("solving (10 viewpoints)")
         time.sleep(1.4)
     text = stream.getvalue()
     assert "reading targets" not in text
     assert "solving (10 viewpoints)" in text and "of 2 s" in text
+
+
+class _TimedStream(io.StringIO):
+    """A stream that notes when each write came."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.times: list[float] = []
+
+    def write(self, text: str) -> int:
+        self.times.append(time.monotonic())
+        return super().write(text)
+
+
+def _ticks_every_second(stream: _TimedStream, started: float, ended: float) -> None:
+    """Once the quiet first second is over, every further whole second saw a redraw."""
+    for k in range(1, int(ended - started)):
+        window = (started + k, started + k + 1)
+        assert any(window[0] <= t < window[1] for t in stream.times), (k, stream.times)
+
+
+def test_the_display_ticks_every_second_through_a_long_stage() -> None:
+    from urpt_gcs.progress import StageProgress
+
+    stream = _TimedStream()
+    with StageProgress(stream, time_limit_s=3.0, live=True) as progress:
+        progress("solving (10 viewpoints)")
+        started = time.monotonic()
+        time.sleep(3.5)  # a slow stage
+        ended = time.monotonic()
+    _ticks_every_second(stream, started, ended)
+    assert "of 3 s" in stream.getvalue()
+
+
+def test_the_display_ticks_while_ortools_holds_the_interpreter() -> None:
+    from urpt_gcs.gtsp import Instance, euclidean_matrix
+    from urpt_gcs.progress import StageProgress
+    from urpt_gcs.solvers import SolveSettings, solve
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 1000, (300, 2))
+    covers = np.zeros((300, 30), dtype=bool)
+    covers[np.arange(300), np.arange(300) % 30] = True
+    home = np.hypot(*(points - 500.0).T)
+    # With a depot, one search for the whole time limit.
+    instance = Instance(
+        covers=covers,
+        distance=euclidean_matrix(points),
+        depot_distance=np.vstack([home, home]),
+        points_xy=points,
+    )
+    stream = _TimedStream()
+    with StageProgress(stream, time_limit_s=3.0, live=True) as progress:
+        progress("solving (300 viewpoints)")
+        started = time.monotonic()
+        solve(instance, "ortools", SolveSettings(time_limit_s=3.0))
+        ended = time.monotonic()
+    _ticks_every_second(stream, started, ended)
+
+
+def test_the_display_ticks_while_the_exact_dp_runs() -> None:
+    from test_exact import _random_instance
+
+    from urpt_gcs.progress import StageProgress
+    from urpt_gcs.solvers.exact import search_exact, warm_up
+
+    warm_up()
+    instance = _random_instance(1, n=200, m=16, depot=True, overlap=0.0)
+    stream = _TimedStream()
+    with StageProgress(stream, time_limit_s=3.0, live=True) as progress:
+        progress("solving (200 viewpoints)")
+        started = time.monotonic()
+        # Seeded with the worst tour, so that nothing is pruned and the DP runs to the limit.
+        search_exact(instance, list(range(200)), deadline=time.perf_counter() + 3.0)
+        ended = time.monotonic()
+    _ticks_every_second(stream, started, ended)
+
+
+def test_without_a_terminal_each_stage_prints_one_line_with_its_time(
+    site: dict[str, Path],
+) -> None:
+    args = ["plan", "--dem", str(site["dem"]), "--targets", str(site["targets"])]
+    result = _run([*args, "--out", str(site["tmp"] / "out"), "--time-limit", "0.5"])
+    assert result.exit_code == 0, result.output
+    lines = result.stderr.splitlines()
+    assert lines and all(STAGE_LINE.fullmatch(line) for line in lines), result.stderr
+    stages = [line[4 : line.rindex(":")] for line in lines]
+    assert stages[:4] == [
+        "reading targets",
+        "reading terrain",
+        "visibility of 2 targets",
+        "checking viewpoints",
+    ]
+    assert stages[4].startswith("preparing the ") and stages[5].startswith("solving (")
+    assert stages[6:] == ["checking the missions", "writing outputs"]
+    for quiet in ("--quiet", "--json"):
+        again = _run([*args, "--out", str(site["tmp"] / quiet), "--time-limit", "0.5", quiet])
+        assert again.exit_code == 0 and again.stderr == "", again.stderr
 
 
 # --- what escapes a command: one line all the same ------------------------------------------
@@ -447,4 +545,7 @@ def test_ctrl_c_while_planning_is_one_line_and_130(when: str, tmp_path: Path) ->
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     code, err = _interrupt(tmp_path, when, env)
-    assert (code, err) == (130, "urpt-gcs: interrupted\n")
+    # The stages finished before the interruption printed their lines (stderr is a pipe).
+    *stages, last = err.splitlines(keepends=True)
+    assert all(STAGE_LINE.fullmatch(line.rstrip("\n")) for line in stages), err
+    assert (code, last) == (130, "urpt-gcs: interrupted\n")

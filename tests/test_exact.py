@@ -10,7 +10,7 @@ import pytest
 
 from urpt_gcs.gtsp import Instance, euclidean_matrix
 from urpt_gcs.solvers import SolveSettings, choose, solve
-from urpt_gcs.solvers.exact import exact_work
+from urpt_gcs.solvers.exact import ExactSolver, exact_work, greedy_order, search_exact
 
 
 def _random_instance(
@@ -74,3 +74,31 @@ def test_auto_picks_exact_when_it_fits() -> None:
     tour = solve(small, "auto", SolveSettings(time_limit_s=1.0))
     other = solve(small, "ortools", SolveSettings(time_limit_s=1.0))
     assert tour.proven_optimal and tour.length <= other.length + 1e-9
+
+
+@pytest.mark.parametrize("depot", [True, False])
+def test_stopped_early_it_keeps_a_covering_tour_and_a_valid_bound(depot: bool) -> None:
+    inst = _random_instance(3, n=40, m=10, depot=depot, overlap=0.1)
+    seed = greedy_order(inst)
+    whole = search_exact(inst, seed)
+    assert whole.proven and whole.work > 1000
+    for work_limit in (1, whole.work // 100, whole.work // 3):
+        tour = ExactSolver(work_limit=work_limit).solve(inst, SolveSettings(time_limit_s=600.0))
+        assert not tour.proven_optimal, work_limit
+        assert inst.uncovered(list(tour.order)) == []
+        assert tour.length == pytest.approx(inst.tour_length(list(tour.order)), rel=1e-12)
+        assert 0.0 <= tour.lower_bound <= whole.length + 1e-9 <= tour.length + 1e-9
+        assert any("stopped at the time limit" in note for note in tour.notes)
+        # The work count, not the clock, decides where it stops.
+        stopped = search_exact(inst, seed, work_limit=work_limit)
+        again = search_exact(inst, seed, work_limit=work_limit)
+        assert stopped == again and not stopped.proven and stopped.work >= work_limit
+        assert stopped.lower_bound <= whole.length + 1e-9
+
+
+def test_a_deadline_already_past_still_answers_with_a_tour() -> None:
+    inst = _random_instance(4, n=30, m=8, depot=False)
+    found = search_exact(inst, deadline=0.0)
+    assert not found.proven and found.work == 0
+    assert inst.uncovered(list(found.order)) == []
+    assert found.lower_bound <= solve(inst, "exact").length + 1e-9

@@ -402,6 +402,7 @@ def plan(
     stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
     tour = solve(instance, solver, settings.solve)
     stages.lap("solve")
+    stages.say("checking the missions")
     flight = _fly(site, area, tour, settings)
     stages.lap("checks")
     return Plan(

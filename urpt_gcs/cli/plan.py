@@ -106,7 +106,7 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
     type=float,
     default=5.0,
     show_default=True,
-    help="Seconds the solver may search.",
+    help="Seconds the solve stage may take (compiling the solver on first use aside).",
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
@@ -193,19 +193,20 @@ def plan_command(
                 hover_speed_m_s=speed,
             ),
         )
-        if sys.stderr.isatty() and not (quiet or as_json):
-            with StageProgress(sys.stderr, time_limit) as progress:
-                result = plan(Path(dem), Path(targets), settings, progress=progress)
-        else:
-            result = plan(Path(dem), Path(targets), settings)
-        also = []
-        if export_gtsp is not None and export is not None:
-            from urpt_gcs.formats.gtsplib import write_gtsplib
+        # A ticking line on a terminal, else a line per stage; nothing with --quiet or --json.
+        with StageProgress(sys.stderr, time_limit) as progress:
+            say = None if quiet or as_json else progress
+            result = plan(Path(dem), Path(targets), settings, progress=say)
+            if say is not None:
+                say("writing outputs")
+            also = []
+            if export_gtsp is not None and export is not None:
+                from urpt_gcs.formats.gtsplib import write_gtsplib
 
-            comment = f"urpt-gcs plan of {Path(targets).name}"
-            text = write_gtsplib(result.instance, export_gtsp.stem, comment)
-            also.append((export, {export_gtsp.name: text}))
-        data = write_products(result, destination, with_map=not no_map, also=also)
+                comment = f"urpt-gcs plan of {Path(targets).name}"
+                text = write_gtsplib(result.instance, export_gtsp.stem, comment)
+                also.append((export, {export_gtsp.name: text}))
+            data = write_products(result, destination, with_map=not no_map, also=also)
     except UrptError as exc:
         fail(exc)
         return

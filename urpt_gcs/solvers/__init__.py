@@ -54,7 +54,9 @@ def choose(instance: Instance, name: str = "auto") -> str:
 def prepare(name: str) -> None:
     """Compile the named solver's kernels now (numba; cached on disk after the first run), so
     that its time limit is spent searching."""
-    if name == "exact":
+    # The exact solver seeds itself with the heuristic's search; approx tours its centres
+    # with the exact solver.
+    if name in ("exact", "approx"):
         from urpt_gcs.solvers.exact import warm_up as warm_exact
 
         warm_exact()

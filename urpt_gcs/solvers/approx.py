@@ -4,7 +4,8 @@ With the flight plane at ``H``, the highest terrain at ``l`` and camera half-ang
 
 1. inner discs of radius ``r = (H - l) tan(delta)`` around every target;
 2. a maximal set of pairwise disjoint inner discs (greedy);
-3. a TSP tour over their centres (solved exactly here, so ``epsilon = 0``);
+3. a TSP tour over their centres (solved exactly here, so ``epsilon = 0``, unless the time
+   limit or the exact solver's budget stops it first: then the best tour found, reported);
 4. the tour followed, with a full turn around each chosen disc's circumference where it is
    entered, then on to the centre (the nadir of that disc's target).
 
@@ -46,6 +47,9 @@ from urpt_gcs.terrain import FloatArray
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72
+# Shares of the time limit for the first tour over the centres, and for the whole path.
+_SEED_SHARE = 0.2
+_PATH_SHARE = 0.8
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,6 +61,7 @@ class ApproxBounds:
     path_length_m: float  # L_d: the paper's path, circles included
     factor: float  # the theorem's approximation factor
     lower_bound_m: float  # the paper's disc-packing bound
+    centre_tour_proven: bool = True  # the centres' tour is the shortest (the paper's epsilon 0)
 
     def upper_bound_m(self, optimum_m: float) -> float:
         """The theorem's bound on the path for a given optimum."""
@@ -74,13 +79,16 @@ def paper_factor(geometry: Geometry) -> float:
     return (1.0 + 16.0 * k) + 16.0 * math.pi * k
 
 
-def _centre_tour(instance: Instance, centres: FloatArray) -> list[int]:
-    """Shortest closed tour over the chosen centres (and the depot), solved exactly."""
-    from urpt_gcs.solvers.exact import solve_exact
+def _centre_tour(
+    instance: Instance, centres: FloatArray, deadline: float, seed: int
+) -> tuple[list[int], bool]:
+    """Shortest closed tour over the chosen centres (and the depot), solved exactly where the
+    DP fits its budget and the deadline; the order and whether it is proven shortest."""
+    from urpt_gcs.solvers.exact import exact_work, quick_tour, search_exact
 
     k = len(centres)
     if k == 1:
-        return [0]
+        return [0], True
     depot_distance = None
     if instance.depot_xy is not None:
         d = np.hypot(centres[:, 0] - instance.depot_xy[0], centres[:, 1] - instance.depot_xy[1])
@@ -91,14 +99,23 @@ def _centre_tour(instance: Instance, centres: FloatArray) -> list[int]:
         depot_distance=depot_distance,
         points_xy=centres,
     )
-    found = solve_exact(tsp)
-    if found is None:
-        raise SettingsError("internal check failed: no tour over the approximation's centres")
-    return found[0]
+    now = time.perf_counter()
+    order = quick_tour(tsp, now + _SEED_SHARE * max(deadline - now, 0.0), seed)
+    if not exact_work(tsp).fits_budget:
+        return order, False
+    found = search_exact(tsp, order, deadline)
+    return list(found.order), found.proven
 
 
-def paper_path(instance: Instance) -> tuple[FloatArray, ApproxBounds]:
-    """The paper's path as a polyline (closed through the depot, if any) and its bounds."""
+def paper_path(
+    instance: Instance, deadline: float = math.inf, seed: int = 0
+) -> tuple[FloatArray, ApproxBounds]:
+    """The paper's path as a polyline (closed through the depot, if any) and its bounds.
+
+    The tour over the chosen centres is the shortest one unless ``deadline`` (a
+    ``time.perf_counter()`` value) or the exact solver's budget stops its search first; then
+    it is the best found (``ApproxBounds.centre_tour_proven`` is False) and ``seed`` seeds it.
+    """
     g = instance.geometry
     if g is None:
         raise SettingsError("--solver approx needs a planning instance (targets on terrain)")
@@ -110,7 +127,7 @@ def paper_path(instance: Instance) -> tuple[FloatArray, ApproxBounds]:
         )
     chosen = greedy_disjoint(g.targets_xy, r)
     centres = g.targets_xy[chosen]
-    order = _centre_tour(instance, centres)
+    order, proven = _centre_tour(instance, centres, deadline, seed)
     points: list[FloatArray] = []
     if instance.depot_xy is not None:
         points.append(np.asarray(instance.depot_xy, dtype=np.float64))
@@ -134,6 +151,7 @@ def paper_path(instance: Instance) -> tuple[FloatArray, ApproxBounds]:
         path_length_m=length,
         factor=paper_factor(g),
         lower_bound_m=geometric_lower_bound(instance),
+        centre_tour_proven=proven,
     )
     return path, bounds
 
@@ -145,7 +163,9 @@ class ApproxSolver:
 
     def solve(self, instance: Instance, settings: SolveSettings) -> Tour:
         started = time.perf_counter()
-        path, bounds = paper_path(instance)
+        # The photo points are checked on the terrain after the path is made: keep them time.
+        deadline = started + _PATH_SHARE * settings.time_limit_s
+        path, bounds = paper_path(instance, deadline, settings.seed)
         assert instance.oracle is not None and instance.geometry is not None
         on_path = path[1:] if instance.depot_xy is not None else path
         sees = instance.oracle(on_path)
@@ -169,6 +189,12 @@ class ApproxSolver:
             f"paper path {bounds.path_length_m:.1f} m through {bounds.chosen} disjoint inner "
             f"discs of radius {bounds.inner_radius_m:.1f} m; theorem factor {bounds.factor:.1f}",
         )
+        if not bounds.centre_tour_proven:
+            notes += (
+                "the tour over the disc centres is the best found, not proven shortest (time "
+                "limit, or too many centres for the exact solver); the theorem's factor "
+                "assumes it is",
+            )
         if detours:
             notes += (f"{len(detours)} target(s) unseen from the path; nadir detours added",)
         return finish_placed_tour(

@@ -18,9 +18,10 @@ with warm restarts. The time limit is an upper bound that cuts this short, not a
 
 Timing: the kernels are compiled by numba and cached on disk. :func:`warm_up` compiles them
 (some 20 s in a fresh environment) or loads them from the cache (well under a second) once
-per process, before the clock starts: ``SolveSettings.time_limit_s`` bounds the search and
-``Tour.solve_s`` excludes the one-off compilation. A run is a pure function of
-``SolveSettings.seed`` unless the time limit cuts it short.
+per process, before the clock starts: ``SolveSettings.time_limit_s`` bounds the solve, the
+partition form and its neighbour lists included, and ``Tour.solve_s`` excludes the one-off
+compilation. A run is a pure function of ``SolveSettings.seed`` unless the time limit cuts it
+short.
 """
 
 from __future__ import annotations
@@ -180,16 +181,19 @@ def warm_up() -> None:
     clustered = Clustered(d, np.arange(12) % 6, 6, np.arange(12), None)
     # Two trials, so that the crossing is compiled too.
     search = SearchSettings(trials=2, neighbours=2)
-    _search(_prepare(clustered, search.neighbours), SolveSettings(time_limit_s=60.0), search)
+    deadline = time.perf_counter() + 60.0
+    _search(_prepare(clustered, search.neighbours), SolveSettings(), search, deadline)
 
 
 class _Run:
     """One search: the instance's kernel arguments, scratch space, generator and deadline."""
 
-    def __init__(self, p: _Problem, settings: SolveSettings, search: SearchSettings) -> None:
+    def __init__(
+        self, p: _Problem, settings: SolveSettings, search: SearchSettings, deadline: float
+    ) -> None:
         m = p.m
         self.p, self.search, self.m = p, search, m
-        self.deadline = time.perf_counter() + settings.time_limit_s
+        self.deadline = deadline
         self.rng = np.random.default_rng(settings.seed)
         self.P = p.kernel_args
         self.W = (
@@ -254,14 +258,14 @@ class _Run:
         return cost
 
 
-def _search(p: _Problem, settings: SolveSettings, search: SearchSettings) -> I32:
+def _search(p: _Problem, settings: SolveSettings, search: SearchSettings, deadline: float) -> I32:
     """The best node cycle (internal numbering) found before the stopping rule or deadline.
 
     Cold trials from random tours, each annealed with ``search.restarts`` warm restarts;
     then the best of them is crossed with the others and annealed again with
     ``search.final_restarts`` warm restarts.
     """
-    run = _Run(p, settings, search)
+    run = _Run(p, settings, search, deadline)
     best, best_cost = run.fresh_tour()
     elite: list[I32] = []
     for trial in range(search.trials):
@@ -285,7 +289,10 @@ def _search(p: _Problem, settings: SolveSettings, search: SearchSettings) -> I32
 
 
 def solve_clustered(
-    clustered: Clustered, settings: SolveSettings, search: SearchSettings | None = None
+    clustered: Clustered,
+    settings: SolveSettings,
+    search: SearchSettings | None = None,
+    deadline: float | None = None,
 ) -> list[int]:
     """The best node cycle the search finds on the partition form.
 
@@ -297,6 +304,9 @@ def solve_clustered(
         Time limit (an upper bound on the search; compilation excluded) and seed.
     search
         Effort and heuristic parameters; the defaults when None.
+    deadline
+        ``time.perf_counter()`` value by which to answer, when the caller's clock started
+        before this call; else the time limit counts from here (after compilation).
 
     Returns
     -------
@@ -306,9 +316,11 @@ def solve_clustered(
     if clustered.n_clusters == 0:
         return []
     warm_up()
+    if deadline is None:
+        deadline = time.perf_counter() + settings.time_limit_s
     search = search or SearchSettings()
     p = _prepare(clustered, search.neighbours)
-    tour = _search(p, settings, search)
+    tour = _search(p, settings, search, deadline)
     return [int(v) for v in p.node_of[tour]]
 
 
@@ -336,7 +348,7 @@ class HeuristicSolver:
         warm_up()
         started = time.perf_counter()
         clustered = cluster_instance(instance)
-        cycle = solve_clustered(clustered, settings)
+        cycle = solve_clustered(clustered, settings, deadline=started + settings.time_limit_s)
         return finish_tour(
             instance,
             viewpoint_order(clustered, cycle),

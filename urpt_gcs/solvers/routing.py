@@ -4,7 +4,8 @@ It works on the partition form (:mod:`urpt_gcs.solvers.clustered`): a viewpoint 
 several targets is one node per target, so "exactly one node per disjunction" still lets a
 tour use one viewpoint for several targets. Routing needs a start node: the depot when there
 is one; otherwise each node of the smallest cluster in turn, sharing the time limit. Guided
-local search runs until the time limit.
+local search runs until the time limit, which counts from the start of the solve: building
+the model (a second for a few thousand nodes) is part of it.
 """
 
 from __future__ import annotations
@@ -31,14 +32,23 @@ _SCALE = 100.0
 _BYTES_PER_NODE_PAIR = 72.0
 
 
-def route_clustered(clustered: Clustered, start: int, time_limit_s: float) -> list[int] | None:
-    """Best node cycle found from ``start`` within the time limit (None if none found)."""
+def route_clustered(
+    clustered: Clustered, start: int, time_limit_s: float, deadline: float | None = None
+) -> list[int] | None:
+    """Best node cycle found from ``start`` within the time limit (None if none found).
+
+    The limit counts from this call, model building included, or ends at ``deadline`` (a
+    ``time.perf_counter()`` value) when one is given.
+    """
+    if deadline is None:
+        deadline = time.perf_counter() + time_limit_s
     n = clustered.n_nodes
     cost = np.rint(clustered.distance * _SCALE).astype(np.int64)
     manager = pywrapcp.RoutingIndexManager(n, 1, start)
     routing = pywrapcp.RoutingModel(manager)
     # A matrix callback stays in C++; a Python callback would be called millions of times.
-    callback = routing.RegisterTransitMatrix(cost.tolist())
+    # Rows one by one, so that other threads (the progress display) run in between.
+    callback = routing.RegisterTransitMatrix([row.tolist() for row in cost])
     routing.SetArcCostEvaluatorOfAllVehicles(callback)
     start_cluster = clustered.cluster[start]
     for k, members in enumerate(clustered.members()):
@@ -54,7 +64,15 @@ def route_clustered(clustered: Clustered, start: int, time_limit_s: float) -> li
     params.local_search_metaheuristic = (
         routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
     )
-    params.time_limit.FromMilliseconds(max(int(time_limit_s * 1000), 1))
+    params.time_limit.FromMilliseconds(max(int((deadline - time.perf_counter()) * 1000), 1))
+
+    # The search holds the GIL; a limit that calls back into Python lets other threads (the
+    # progress display) run meanwhile, and ends the search on our clock.
+    def out_of_time() -> bool:
+        return time.perf_counter() >= deadline
+
+    limit = routing.solver().CustomLimit(out_of_time)
+    routing.AddSearchMonitor(limit)
     solution = routing.SolveWithParameters(params)
     if solution is None:
         return None
@@ -66,15 +84,22 @@ def route_clustered(clustered: Clustered, start: int, time_limit_s: float) -> li
     return cycle
 
 
-def solve_clustered(clustered: Clustered, time_limit_s: float) -> list[int]:
-    """Best node cycle over the possible starts, within ``time_limit_s`` in all."""
+def solve_clustered(
+    clustered: Clustered, time_limit_s: float, deadline: float | None = None
+) -> list[int]:
+    """Best node cycle over the possible starts, within ``time_limit_s`` in all (counted from
+    this call) or by ``deadline`` (a ``time.perf_counter()`` value) when one is given."""
+    if deadline is None:
+        deadline = time.perf_counter() + time_limit_s
     if clustered.depot_node is not None:
         starts = [clustered.depot_node]
     else:
         starts = min(clustered.members(), key=len).tolist()
     best: list[int] | None = None
-    for start in starts:
-        cycle = route_clustered(clustered, int(start), time_limit_s / len(starts))
+    for k, start in enumerate(starts):
+        # What is left is shared among the starts still to try.
+        share = (deadline - time.perf_counter()) / (len(starts) - k)
+        cycle = route_clustered(clustered, int(start), share, time.perf_counter() + share)
         if cycle is not None and (
             best is None or clustered.cycle_length(cycle) < clustered.cycle_length(best)
         ):
@@ -93,7 +118,7 @@ class RoutingSolver:
         require_partition_memory(instance, self.name, _BYTES_PER_NODE_PAIR)
         started = time.perf_counter()
         clustered = cluster_instance(instance)
-        cycle = solve_clustered(clustered, settings.time_limit_s)
+        cycle = solve_clustered(clustered, settings.time_limit_s, started + settings.time_limit_s)
         return finish_tour(
             instance,
             viewpoint_order(clustered, cycle),
