@@ -12,7 +12,7 @@ import pyproj
 import pytest
 import shapely
 from click.testing import CliRunner
-from conftest import DEMO, STAGE_LINE, WriteDem, grid_xy
+from conftest import DEMO, WriteDem, grid_xy
 from fastkml import kml as fastkml
 from independent import check_mission, leg_clearances, load_raster, read_waypoints_file
 from shapely.geometry import Point, shape
@@ -124,9 +124,8 @@ def test_max_agl_warns_and_strict_refuses(tmp_path: Path) -> None:
     assert any("--max-agl 50" in w for w in json.loads(warn.stdout)["warnings"])
     strict = CliRunner().invoke(main, [*base, "--out", str(tmp_path / "b"), "--strict"])
     assert strict.exit_code == 1
-    # Before the error, a line per stage that finished (stderr is no terminal).
-    *stages, error = strict.stderr.strip().splitlines()
-    assert "--max-agl 50" in error and all(STAGE_LINE.fullmatch(line) for line in stages)
+    (error,) = strict.stderr.strip().splitlines()
+    assert "--max-agl 50" in error
     assert not (tmp_path / "b").exists()
 
 

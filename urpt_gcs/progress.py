@@ -5,8 +5,8 @@ closes. On a terminal, a stage that passes a second gets a line that ticks: its 
 and for the solver stage a bar towards its time limit. A background thread redraws it, so it
 keeps moving while compiled code (numba kernels, OR-Tools) runs on the main thread. Anywhere
 else (a log file, a pipe) each stage prints one line as it ends, with its time:
-``... visibility of 16 targets: 0.05 s``; a stage that fails prints nothing, so the error is
-the last line.
+``... visibility of 16 targets: 0.05 s`` (the CLI writes those on stdout, before the summary,
+so that stderr holds only errors and warnings); a stage that fails prints nothing.
 """
 
 from __future__ import annotations

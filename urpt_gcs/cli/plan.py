@@ -193,8 +193,11 @@ def plan_command(
                 hover_speed_m_s=speed,
             ),
         )
-        # A ticking line on a terminal, else a line per stage; nothing with --quiet or --json.
-        with StageProgress(sys.stderr, time_limit) as progress:
+        # A ticking line when stderr is a terminal; else a line per stage on stdout, before
+        # the summary, so stderr holds nothing but the error. Nothing with --quiet or --json.
+        live = sys.stderr.isatty()
+        stream = sys.stderr if live else sys.stdout
+        with StageProgress(stream, time_limit, live=live) as progress:
             say = None if quiet or as_json else progress
             result = plan(Path(dem), Path(targets), settings, progress=say)
             if say is not None:
