@@ -163,6 +163,16 @@ def sitl_group(
     help="Fly on this vehicle (e.g. ArduPilot SITL, tcpout://127.0.0.1:5760) instead of the "
     "built-in simulator; give its --speedup.",
 )
+@click.option(
+    "--px4",
+    "px4",
+    is_flag=False,
+    flag_value="",
+    default=None,
+    metavar="PATH",
+    help="Start PX4's SITL from PATH (the folder with run.sh; without PATH, $URPT_PX4) and "
+    "fly the PX4 mission on it at --speedup.",
+)
 def sitl_replay_command(
     dem: Path,
     targets: Path,
@@ -173,14 +183,17 @@ def sitl_replay_command(
     takeoff: str,
     timeout: float | None,
     connect: str | None,
+    px4: str | None,
 ) -> None:
     """Fly a mission on the simulated copter via MAVSDK; check photos and clearance on the DEM."""
     from urpt_gcs.sitl.judge import report_text
+    from urpt_gcs.sitl.px4_sitl import find_build
     from urpt_gcs.sitl.replay import ReplaySettings, replay
 
     progress = terminal_progress()
     try:
         settings = ReplaySettings(
+            px4=find_build(px4) if px4 is not None else None,
             speedup=speedup,
             fov_deg=fov,
             min_clearance_m=min_clearance,
