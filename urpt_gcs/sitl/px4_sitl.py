@@ -8,7 +8,9 @@ commands produce CAMERA_IMAGE_CAPTURED. Parameters are set before boot through r
 MAVLink is reached on loopback only, on the API link of instance N: PX4 sends to UDP
 ``14540 + N`` and listens on ``14580 + N``, so a ground station may connect, leave and
 connect again (PX4's GCS link, 18570 + N, answers only the first peer it hears). The
-instance is the first of 1-9 whose ports and lock file are free.
+instance is the first of 1-9 whose ports and lock file are free. The GCS link sends to
+127.0.0.1:14550 until a peer speaks to it, whatever the instance; the launcher speaks to it
+first, from a socket of its own, so this SITL never reaches a ground station listening there.
 
 On leaving the ``with`` block (also on Ctrl-C or an error) the process started is sent
 SIGTERM by its pid, killed if it does not exit, and ``/tmp/px4_lock-N``,
@@ -42,6 +44,7 @@ STOP_TIMEOUT_S = 10.0
 READY_TEXT = "Ready for takeoff!"
 FAILED_TEXTS = ("ERROR [px4] Startup script returned with return value", "already running")
 LOG_NAME = "px4.log"
+GCS_PORT = 18570  # + instance: PX4's GCS link listens here
 _LOG_TAIL_CHARS = 300
 
 
@@ -72,7 +75,7 @@ def ports(instance: int) -> tuple[int, ...]:
     return (
         14540 + instance,  # API link: PX4 sends here, the ground station listens
         14580 + instance,  # API link: PX4 listens
-        18570 + instance,  # GCS link
+        GCS_PORT + instance,  # GCS link
         14280 + instance,  # camera link
         13030 + instance,  # gimbal link
         19450 + instance,  # SIH display link
@@ -168,9 +171,15 @@ def _tail(log: Path) -> str:
     return " / ".join(lines[-3:])[-_LOG_TAIL_CHARS:]
 
 
-def _wait_ready(process: subprocess.Popen[bytes], log: Path, timeout_s: float) -> None:
+def _wait_ready(
+    process: subprocess.Popen[bytes], log: Path, timeout_s: float, claim: socket.socket, port: int
+) -> None:
     deadline = time.monotonic() + timeout_s
     while True:
+        # PX4's UDP link takes the first loopback sender as its peer; a byte that is no
+        # MAVLink is enough and starts nothing (no GCS heartbeat, no link-loss failsafe).
+        with contextlib.suppress(OSError):
+            claim.sendto(b"\0", ("127.0.0.1", port))
         text = log.read_text(errors="replace") if log.exists() else ""
         if READY_TEXT in text:
             return
@@ -249,7 +258,9 @@ def launch(
     scratch = Path(tempfile.mkdtemp(prefix=f"urpt-px4-{instance}-"))
     log = scratch / LOG_NAME
     process: subprocess.Popen[bytes] | None = None
+    claim = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
+        claim.bind(("127.0.0.1", 0))
         _command_links(build, scratch / "bin")
         with log.open("wb") as out:
             process = subprocess.Popen(
@@ -262,11 +273,12 @@ def launch(
                 # Ctrl-C goes to us, not to PX4: it is stopped below, in order.
                 start_new_session=True,
             )
-        _wait_ready(process, log, start_timeout_s)
+        _wait_ready(process, log, start_timeout_s, claim, GCS_PORT + instance)
         yield RunningSitl(f"udpin://127.0.0.1:{14540 + instance}", process.pid, instance, scratch)
     finally:
         if process is not None:
             _stop(process)
+        claim.close()
         for leftover in (_lock(instance), _sock(instance)):
             with contextlib.suppress(FileNotFoundError):
                 leftover.unlink()
