@@ -148,8 +148,8 @@ _AP_FRAME = {
 }
 
 
-# PX4's mavlink_mission.cpp: a located item keeps only whether its altitude is relative, and is
-# returned in the _INT frame of that kind.
+# Seen on PX4 v1.16 SITL: a located item comes back in the _INT frame of its altitude's kind
+# (relative or above mean sea level).
 _PX4_FRAME = {
     mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
     mavlink.MAV_FRAME_GLOBAL: mavlink.MAV_FRAME_GLOBAL_INT,

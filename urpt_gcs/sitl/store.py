@@ -16,8 +16,8 @@ mission uses, so a read-back here differs from the upload exactly where ArduPilo
   DO_MOUNT_CONTROL keeps params 1-3; DO_DIGICAM_CONTROL keeps params 1-4 and x, y as bytes;
 * ``current`` always reads 0, ``autocontinue`` always 1.
 
-In PX4 mode there is no home item, and items are kept as PX4 v1.16 keeps them
-(``mavlink_mission.cpp``, as seen against its SITL):
+In PX4 mode there is no home item, and items are kept as PX4 v1.16 SITL was seen to keep
+them:
 
 * a location command is accepted in frames 0/3/5/6 and comes back in 5 (GLOBAL_INT) or 6
   (GLOBAL_RELATIVE_ALT_INT); the terrain frames 10/11 and any other frame are refused with
