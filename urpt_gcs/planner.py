@@ -617,13 +617,15 @@ def _check_as_written(
 
 
 def flight_model(settings: PlanSettings) -> FlightModel:
-    """How the flight-time estimate sees the vehicle, from the settings."""
-    return FlightModel(
+    """How the flight-time estimate sees the vehicle: its firmware's model at the settings'
+    speeds."""
+    make = FlightModel.arducopter if settings.mission.firmware == "ardupilot" else FlightModel.px4
+    return make(
         cruise_m_s=settings.mission.cruise_speed_m_s,
+        hold_s=settings.mission.hold_s,
         climb_m_s=settings.climb_m_s,
         descent_m_s=settings.descent_m_s,
         accel_m_s2=settings.accel_m_s2,
-        hold_s=settings.mission.hold_s,
     )
 
 
