@@ -202,3 +202,38 @@ def test_reaches_best_known_on_gtsplib(name: str, best_known: int) -> None:
     tour = HeuristicSolver().solve(instance, SETTINGS)
     assert tour.length == best_known
 
+
+def plane_instance(m: int, per_target: int, seed: int = 0) -> Instance:
+    """``m`` targets on the plane, each seen by ``per_target`` viewpoints around it, some of
+    which also see a neighbouring target; a depot in a corner."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((m, 2)) * 100.0 * math.sqrt(m)
+    owner = np.repeat(np.arange(m), per_target)
+    xy = centres[owner] + rng.normal(scale=15.0, size=(len(owner), 2))
+    extra = rng.random(len(owner)) < 0.2
+    vp = np.r_[np.arange(len(owner)), np.flatnonzero(extra)]
+    tg = np.r_[owner, (owner[extra] + 1) % m]
+    return Instance.from_cover_pairs(vp, tg, xy, m, depot_xy=(0.0, 0.0))
+
+
+def test_2000_clusters_on_the_plane_within_the_time_limit_and_linear_memory() -> None:
+    from urpt_gcs.solvers.clustered import partition_nodes
+    from urpt_gcs.solvers.heuristic import _BYTES_PER_NODE, _prepare
+
+    instance = plane_instance(2000, 6)
+    warm_up()
+    limit = 3.0
+    started = time.perf_counter()
+    tour = HeuristicSolver().solve(instance, SolveSettings(time_limit_s=limit, seed=0))
+    assert time.perf_counter() - started <= 1.1 * limit
+    assert not instance.uncovered(tour.order)
+    # Nothing node-by-node: every array of the instance and of the search is linear.
+    n = partition_nodes(instance)
+    p = _prepare(cluster_instance(instance), SearchSettings().neighbours)
+    assert p.d.size == p.dt.size == p.setd.size == 0
+    assert p.nbr.shape == (2001, 16)
+    assert p.nbytes <= 64 * n and instance.nbytes() <= 128 * instance.n_viewpoints
+    # The budget check counts bytes per node: well under 1 % of one dense node matrix.
+    assert _BYTES_PER_NODE * n < 0.01 * 8.0 * n * n
+    # Far shorter than visiting the targets in file order (random places).
+    assert tour.length < 0.2 * instance.tour_length(np.arange(0, 6 * 2000, 6))
