@@ -234,10 +234,6 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--dem", str(BAD / ("d" * 300 + ".tif"))],
         ["DEM", "a name of 304 characters", "too long", "--dem"],
     ),
-    "demo_300_targets": (
-        ["--targets", str(BAD / "demo_300_targets.csv")],
-        ["300 targets", "GiB", "fewer targets per plan"],
-    ),
     "targets_100000": (
         ["--targets", "%targets_100000.csv"],
         ["100000 targets in", "targets_100000.csv", "GiB", "plan fewer targets at a time"],

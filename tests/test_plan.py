@@ -118,6 +118,22 @@ REAL_CASES = [
 ]
 
 
+def test_300_targets_on_the_demo_plan_and_check(tmp_path: Path) -> None:
+    """Beyond the exact solver and the dense arrays of old: every target seen and every leg
+    clear, checked independently on the written sorties."""
+    targets = Path(__file__).parent / "data" / "targets" / "demo_300_targets.csv"
+    result = plan(DEMO / "site.tif", targets, PlanSettings(solve=SolveSettings(time_limit_s=3.0)))
+    write_products(result, tmp_path, with_map=False)
+    files = sorted(tmp_path.glob("mission*.waypoints"))
+    assert len(files) == len(result.sorties)
+    points = [
+        (n, float(a), float(o))
+        for n, a, o in (line.split(",") for line in targets.read_text().splitlines()[1:])
+    ]
+    assert len(points) == 300
+    assert check_mission(DEMO / "site.tif", files, points, fov_deg=30.0, min_clearance_m=10.0) == []
+
+
 @pytest.mark.parametrize("tolerance_m", [1.5, 3.0])
 def test_every_stop_sees_its_targets_from_around_its_waypoint(
     tmp_path: Path, tolerance_m: float
