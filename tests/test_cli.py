@@ -399,7 +399,11 @@ def test_without_a_terminal_each_stage_prints_one_line_with_its_time(
         "checking viewpoints",
     ]
     assert stages[4].startswith("preparing the ") and stages[5].startswith("solving (")
-    assert stages[6:] == ["checking the missions", "writing outputs"]
+    assert stages[6:] == [
+        "stops seeing from anywhere within 1.5 m",
+        "checking the missions",
+        "writing outputs",
+    ]
     for quiet in ("--quiet", "--json"):
         again = _run([*args, "--out", str(site["tmp"] / quiet), "--time-limit", "0.5", quiet])
         assert again.exit_code == 0 and again.stderr == "", again.stderr

@@ -140,7 +140,9 @@ def test_web_mercator_dem_is_planned_with_true_lengths(
     # Mercator stretches lengths by 1.49 at 47.7 N; the plan's must be ground lengths.
     assert data["tour_length_m"] == pytest.approx(_geodesic_tour_m(out), rel=2e-3)
     # The warped terrain is resampled, so the tour may differ a little from the metre one.
-    assert data["tour_length_m"] == pytest.approx(metre_plan["tour_length_m"], rel=0.01)
+    # Lengths are true (above); the tour itself differs a little from the metre plan's, as the
+    # warped raster is resampled and stops are moved for the position margin.
+    assert data["tour_length_m"] == pytest.approx(metre_plan["tour_length_m"], rel=0.03)
     problems = check_mission(
         dem, sorted(out.glob("mission*.waypoints")), _targets(TARGETS), 30.0, 10.0
     )
