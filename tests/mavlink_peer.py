@@ -88,3 +88,27 @@ async def mavsdk_autopilot(autopilot: int, timeout_s: float = 5.0) -> AsyncItera
             if system is None:
                 raise AssertionError(f"no heartbeat reached MAVSDK on UDP {port} in {timeout_s} s")
             yield system
+
+
+def split_frames(buffer: bytes) -> tuple[list[bytes], bytes]:
+    """Whole MAVLink 1/2 frames from the start of ``buffer``, and what is left over."""
+    frames = []
+    start = 0
+    while start < len(buffer):
+        magic = buffer[start]
+        if magic not in (mavlink.PROTOCOL_MARKER_V2, mavlink.PROTOCOL_MARKER_V1):
+            start += 1  # not a frame start: skipped, as a receiver would
+            continue
+        if len(buffer) - start < 3:
+            break
+        length = buffer[start + 1]
+        if magic == mavlink.PROTOCOL_MARKER_V2:
+            signed = buffer[start + 2] & mavlink.MAVLINK_IFLAG_SIGNED
+            size = 10 + length + 2 + (13 if signed else 0)
+        else:
+            size = 6 + length + 2
+        if len(buffer) - start < size:
+            break
+        frames.append(buffer[start : start + size])
+        start += size
+    return frames, buffer[start:]

@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, SHARED
+from mavlink_peer import split_frames
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -288,7 +289,7 @@ class LossyRelay:
             if not chunk:
                 return
             buffer += chunk
-            frames, buffer = _split_frames(buffer)
+            frames, buffer = split_frames(buffer)
             for frame in frames:
                 if self.rngs[direction].random() < self.loss:
                     self.dropped[direction] += 1
@@ -303,30 +304,6 @@ class LossyRelay:
         self.stopping.set()
         for sock in (self.server, *getattr(self, "sockets", ())):
             sock.close()
-
-
-def _split_frames(buffer: bytes) -> tuple[list[bytes], bytes]:
-    """Whole MAVLink 1/2 frames from the start of ``buffer``, and what is left over."""
-    frames = []
-    start = 0
-    while start < len(buffer):
-        magic = buffer[start]
-        if magic not in (mavlink.PROTOCOL_MARKER_V2, mavlink.PROTOCOL_MARKER_V1):
-            start += 1  # not a frame start: skipped, as a receiver would
-            continue
-        if len(buffer) - start < 3:
-            break
-        length = buffer[start + 1]
-        if magic == mavlink.PROTOCOL_MARKER_V2:
-            signed = buffer[start + 2] & mavlink.MAVLINK_IFLAG_SIGNED
-            size = 10 + length + 2 + (13 if signed else 0)
-        else:
-            size = 6 + length + 2
-        if len(buffer) - start < size:
-            break
-        frames.append(buffer[start : start + size])
-        start += size
-    return frames, buffer[start:]
 
 
 @needs_sitl

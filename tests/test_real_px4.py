@@ -10,7 +10,11 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import random
 import re
+import socket
+import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,11 +22,12 @@ import pyproj
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, SHARED
+from mavlink_peer import split_frames
 from mavsdk.plugins.mission_raw import MissionItem as MavsdkItem
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
-from urpt_gcs.link import upload_verified
+from urpt_gcs.link import upload, upload_verified
 from urpt_gcs.mavsdk_link import connect
 from urpt_gcs.mission import Mission, waypoint_positions
 from urpt_gcs.readback import compare, wire_items
@@ -34,6 +39,7 @@ from urpt_gcs.sitl.replay import (
     ReplaySettings,
     VehicleIdentity,
     fly,
+    free_udp_port,
     read_mission,
 )
 
@@ -252,3 +258,70 @@ def test_fence_uploads_and_reads_back_beside_the_mission(demo_plan: Path) -> Non
         assert (b.param1, b.x, b.y, b.z) == (a.param1, a.x, a.y, a.z)
         assert b.frame == mavlink.MAV_FRAME_GLOBAL_INT
         assert b.autocontinue == 0
+
+
+class UdpLossyRelay:
+    """Stands on PX4's API link (it sends to 14540 + N) and passes MAVLink frames on to a
+    ground station at its own port, dropping a seeded fraction of frames each way."""
+
+    def __init__(self, px4_port: int, loss: float, seed: int) -> None:
+        self.loss = loss
+        self.rngs = (random.Random(seed), random.Random(seed + 1))
+        self.dropped = [0, 0]
+        self.passed = [0, 0]
+        self.vehicle_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.vehicle_side.bind(("127.0.0.1", px4_port))
+        self.gcs_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.gcs_side.bind(("127.0.0.1", 0))
+        self.gcs_port = free_udp_port()
+        self.vehicle: tuple[str, int] | None = None
+        self.stopping = threading.Event()
+        for direction in (0, 1):
+            threading.Thread(target=self._pump, args=(direction,), daemon=True).start()
+
+    def _pump(self, direction: int) -> None:
+        src = self.vehicle_side if direction == 0 else self.gcs_side
+        src.settimeout(0.2)
+        while not self.stopping.is_set():
+            try:
+                data, sender = src.recvfrom(65536)
+            except OSError:
+                continue
+            if direction == 0:
+                self.vehicle = sender
+            frames, _ = split_frames(data)
+            for frame in frames:
+                if self.rngs[direction].random() < self.loss:
+                    self.dropped[direction] += 1
+                    continue
+                self.passed[direction] += 1
+                if direction == 0:
+                    self.gcs_side.sendto(frame, ("127.0.0.1", self.gcs_port))
+                elif self.vehicle is not None:
+                    self.vehicle_side.sendto(frame, self.vehicle)
+
+    def close(self) -> None:
+        self.stopping.set()
+        self.vehicle_side.close()
+        self.gcs_side.close()
+
+
+def test_upload_through_a_relay_dropping_20_percent_each_way(demo_plan: Path) -> None:
+    mission = read_mission(demo_plan)
+    with px4_sitl.launch(PX4, mission.home, SPEEDUP) as sitl:
+        relay = UdpLossyRelay(int(sitl.url.rsplit(":", 1)[1]), 0.2, seed=9)
+        try:
+            started = time.monotonic()
+            report = upload(mission, f"udpin://127.0.0.1:{relay.gcs_port}", timeout_s=20.0)
+            elapsed = time.monotonic() - started
+        finally:
+            relay.close()
+    assert report.items == len(mission.upload_items())
+    assert report.autopilot == "px4"
+    # The relay really dropped about a fifth each way.
+    for dropped, passed in zip(relay.dropped, relay.passed, strict=True):
+        assert 0.1 < dropped / (dropped + passed) < 0.3
+    print(
+        f"\nPX4 upload through 20 % loss: {report.items} items verified in {elapsed:.1f} s, "
+        f"{report.attempts} attempt(s); frames dropped {relay.dropped}, passed {relay.passed}"
+    )
