@@ -21,7 +21,9 @@ from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError
 from urpt_gcs.planner import Plan, PlanSettings, plan
 from urpt_gcs.products import write_products
-from urpt_gcs.solvers import SolveSettings
+from urpt_gcs.safety import FlightModel, split_sorties
+from urpt_gcs.solvers import SolveSettings, Tour
+from urpt_gcs.sorties import order_sorties
 from urpt_gcs.targets import read_targets
 
 ORIGIN = (500_000.0, 5_200_000.0)
@@ -248,6 +250,32 @@ def test_the_tour_is_split_into_sorties(sortie_plan: tuple[Plan, Path, dict]) ->
     assert len(_flown_routes(out)) == len(result.sorties) == len(data["sorties"])
 
 
+def test_summary_reports_the_sorties_as_flown(sortie_plan: tuple[Plan, Path, dict]) -> None:
+    """The reported length is every written sortie's legs, home -> stops -> home, measured
+    independently (pymavlink's loader, geodesics); the bound stays below it and the gap is
+    against it."""
+    _, out, data = sortie_plan
+    geod = pyproj.Geod(ellps="WGS84")
+    routes = _flown_routes(out)
+    assert len(routes) >= 3
+    legs = [geod.line_length(*zip(*route, strict=True)) for route in routes]
+    for leg, reported in zip(legs, data["sorties"], strict=True):
+        assert reported["length_m"] == pytest.approx(leg, rel=2e-3)
+    print(f"\nflown {sum(legs):.1f} m in {len(legs)} sorties, {data['flight_time_s']:.0f} s")
+    assert data["tour_length_m"] == pytest.approx(sum(legs), rel=2e-3)
+    assert data["flight_time_s"] == pytest.approx(
+        sum(s["flight_time_s"] for s in data["sorties"]), abs=0.5
+    )
+    assert data["lower_bound_m"] <= data["tour_length_m"]
+    bound = data["lower_bound_m"]
+    assert data["gap_pct"] == pytest.approx(100 * (data["tour_length_m"] - bound) / bound, abs=0.01)
+    assert data["proven_optimal"] is False
+    found = data["sortie_order"]
+    assert found["flight_time_s"] <= found["plain_cut_flight_time_s"]
+    assert found["flight_time_s"] == pytest.approx(data["flight_time_s"], abs=0.5)
+    assert found["search_s"] <= found["budget_s"] + 0.5
+
+
 def test_kml_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
     result, out, data = sortie_plan
     document, folders = _kml_folders(out / "plan.kml")
@@ -313,3 +341,53 @@ def test_map_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict
     assert len(colours) == len(flown)
     labels = sorted(int(t.get_text()) for t in ax.texts if t.get_text().isdigit())
     assert labels == list(range(1, data["tour_stops"] + 1))
+
+
+# --- the stop order searched for the sorties ---------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_sortie_order_never_flies_longer_than_the_plain_cut(seed: int) -> None:
+    """From a nearest-neighbour tour of random stops, the search's order cuts into sorties
+    of no more total flight time than the tour cut as it is, and its figure is the DP's."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-400.0, 400.0, size=(60, 2))
+    todo, order = list(range(1, len(xy))), [0]
+    while todo:
+        last = xy[order[-1]]
+        nxt = min(todo, key=lambda i: float(np.hypot(*(xy[i] - last))))
+        todo.remove(nxt)
+        order.append(nxt)
+    stops = xy[order]
+    tour = Tour(
+        order=tuple(order),
+        length=0.0,
+        lower_bound=0.0,
+        proven_optimal=False,
+        solver="test",
+        solve_s=0.0,
+        points_xy=stops,
+        sees=np.eye(len(stops), dtype=np.bool_),
+    )
+    model = FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0)
+    names = [f"stop {k}" for k in range(len(stops))]
+    endurance = 6.0 * 60.0
+    plain = split_sorties(stops, (0.0, 0.0), 60.0, model, endurance, names)
+    assert len(plain) >= 3
+    searched, found = order_sorties(
+        tour, (0.0, 0.0), 60.0, model, endurance, names, budget_s=1.0, seed=seed
+    )
+    assert found is not None
+    assert searched.points_xy is not None
+    cut = split_sorties(searched.points_xy, (0.0, 0.0), 60.0, model, endurance, names)
+    total = sum(s.flight_time_s for s in cut)
+    print(f"\nseed {seed}: {sum(s.flight_time_s for s in plain):.0f} s -> {total:.0f} s")
+    assert total <= sum(s.flight_time_s for s in plain) + 1e-6
+    assert found.flight_time_s == pytest.approx(total)
+    assert found.search_s <= 1.5
+    # The same stops, each still with what it sees.
+    assert sorted(map(tuple, searched.points_xy.tolist())) == sorted(map(tuple, stops.tolist()))
+    for k, point in enumerate(searched.points_xy):
+        (i,) = np.flatnonzero((stops == point).all(axis=1))
+        assert (searched.sees[k] == tour.sees[i]).all()
+        assert searched.order[k] == tour.order[i]

@@ -203,7 +203,8 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     count = len(data["sorties"])
     sorties = f" in {count} sorties, each from home and back" if count > 1 else ""
     ax.set_title(
-        f"{data['targets']} targets, {data['tour_stops']} stops, tour {data['tour_length_m']:.0f} m"
+        f"{data['targets']} targets, {data['tour_stops']} stops, "
+        f"{'flown' if count > 1 else 'tour'} {data['tour_length_m']:.0f} m"
         f" ({quality}), {data['flight_time_s'] / 60:.1f} min{sorties}\n"
         f"altitude {data['altitude_amsl_m']:.1f} m AMSL / {data['altitude_above_home_m']:.1f} m "
         f"above home, camera ±{data['fov_deg']:g}°, solver {data['solver']}",

@@ -38,6 +38,7 @@ from urpt_gcs.safety import (
     split_sorties,
 )
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, choose, prepare, solve
+from urpt_gcs.sorties import SEARCH_SHARE, SortieOrder, order_sorties
 from urpt_gcs.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
     WGS84,
@@ -160,6 +161,27 @@ class Plan:
     flight_time_s: float
     timings_s: dict[str, float]
     warnings: tuple[str, ...]
+    sortie_order: SortieOrder | None = None
+
+    @property
+    def flown_length_m(self) -> float:
+        """Length of every sortie as flown, each from home and back, added up."""
+        return math.fsum(s.length_m for s in self.sorties)
+
+    @property
+    def flown_gap(self) -> float:
+        """How much longer the flight may be than the shortest that sees every target:
+        (flown - LB) / LB.
+
+        The tour's lower bound bounds any closed tour from home that sees every target, and
+        sorties from home joined at home are one such tour, no longer than their total: so it
+        bounds the total of any set of sorties too. With one sortie this is the tour's gap.
+        """
+        if len(self.sorties) == 1:
+            return self.tour.gap
+        if self.tour.lower_bound <= 0.0:
+            return math.inf
+        return max(self.flown_length_m - self.tour.lower_bound, 0.0) / self.tour.lower_bound
 
     @property
     def flight_model(self) -> FlightModel:
@@ -422,6 +444,20 @@ def plan(
         site.names,
     )
     stages.lap("margin")
+    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
+    budget = SEARCH_SHARE * settings.solve.time_limit_s
+    stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
+    tour, sortie_order = order_sorties(
+        tour,
+        site.home_xy,
+        _altitude_rel(area),
+        flight_model(settings),
+        endurance,
+        [f"stop {k}" for k in range(1, len(tour.sees) + 1)],
+        budget,
+        settings.solve.seed,
+    )
+    stages.lap("sorties")
     stages.say("checking the missions")
     flight = _fly(site, area, tour, settings)
     stages.lap("checks")
@@ -448,6 +484,7 @@ def plan(
         flight_time_s=sum(s.flight_time_s for s in flight.sorties),
         timings_s=stages.timings_s,
         warnings=(*margin_warnings, *flight.warnings),
+        sortie_order=sortie_order,
     )
 
 
@@ -540,9 +577,7 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
     if tour.points_xy is None:
         raise PlanError(f"internal check failed: solver {tour.solver} returned no positions")
     names = site.names
-    # Centimetre altitudes, rounded up: a higher eye only widens the cone and lifts every
-    # line of sight, so nothing checked above is lost.
-    altitude_rel = math.ceil((area.camera.altitude_m - area.home_ground_m) * 100.0) / 100.0
+    altitude_rel = _altitude_rel(area)
     stop_names = [
         f"stop {k} ({_stop_name(row, names)})" for k, row in enumerate(tour.sees, start=1)
     ]
@@ -580,6 +615,12 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
     return _Flight(
         stop_names, sorties, missions, legs, tuple(_latlon(site.crs, fence_xy)), warnings
     )
+
+
+def _altitude_rel(area: _Area) -> float:
+    """The plane's height above home as written: centimetres, rounded up, since a higher eye
+    only widens the cone and lifts every line of sight, so nothing checked is lost."""
+    return math.ceil((area.camera.altitude_m - area.home_ground_m) * 100.0) / 100.0
 
 
 def _check_cone_width(

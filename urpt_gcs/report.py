@@ -115,10 +115,17 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "target_names": names,
         "viewpoints": inst.n_viewpoints,
         "tour_stops": len(tour.order),
-        "tour_length_m": round(tour.length, 3),
+        # What is flown: every sortie from home and back, added up (the tour itself with one
+        # sortie). The bound holds for it: sorties joined at home are one closed tour.
+        "tour_length_m": round(plan.flown_length_m, 3),
         "lower_bound_m": round(tour.lower_bound, 3),
-        "gap_pct": _round(100.0 * tour.gap, 2),
-        "proven_optimal": tour.proven_optimal,
+        "gap_pct": _round(100.0 * plan.flown_gap, 2),
+        "proven_optimal": tour.proven_optimal and len(plan.sorties) == 1,
+        "solver_tour_length_m": round(
+            tour.length if plan.sortie_order is None else plan.sortie_order.tour_length_m, 3
+        ),
+        "solver_proven_optimal": tour.proven_optimal,
+        "sortie_order": _sortie_order(plan),
         "solver": tour.solver,
         "solve_s": round(tour.solve_s, 3),
         "flight_time_s": round(plan.flight_time_s, 1),
@@ -161,6 +168,23 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "timings_s": {k: round(v, 3) for k, v in plan.timings_s.items()},
         "warnings": list(plan.warnings),
         "files": files or [],
+    }
+
+
+def _sortie_order(plan: Plan) -> dict[str, Any] | None:
+    """What reordering the stops for the sorties did (None for one sortie)."""
+    found = plan.sortie_order
+    if found is None:
+        return None
+    return {
+        "plain_cut_sorties": found.plain_cut_sorties,
+        "plain_cut_length_m": round(found.plain_cut_length_m, 3),
+        "plain_cut_flight_time_s": round(found.plain_cut_flight_time_s, 1),
+        "length_m": round(found.length_m, 3),
+        "flight_time_s": round(found.flight_time_s, 1),
+        "moves": found.moves,
+        "search_s": round(found.search_s, 3),
+        "budget_s": round(found.budget_s, 3),
     }
 
 
@@ -210,7 +234,8 @@ def summary_text(data: dict[str, Any]) -> str:
         + (", ..." if data["targets"] > 6 else "")
         + ")",
         f"viewpoints     {data['viewpoints']} candidates, {data['tour_stops']} in the tour",
-        f"tour           {data['tour_length_m']:.1f} m, {quality}",
+        f"{'flown' if len(data['sorties']) > 1 else 'tour':<15s}"
+        f"{data['tour_length_m']:.1f} m, {quality}",
         f"solver         {data['solver']} in {data['solve_s']:.2f} s",
         f"flight time    {_minutes(data['flight_time_s'])} (estimated at "
         f"{data['cruise_speed_m_s']:g} m/s, {data['hold_s']:g} s hold per photo)",
@@ -228,10 +253,22 @@ def summary_text(data: dict[str, Any]) -> str:
             f"sorties        {len(data['sorties'])} (battery --endurance "
             f"{data['endurance_min']:g} min): "
             + ", ".join(
-                f"#{s['sortie']} {s['stops']} stops {_minutes(s['flight_time_s'])}"
+                f"#{s['sortie']} {s['stops']} stops {s['length_m']:.0f} m "
+                f"{_minutes(s['flight_time_s'])}"
                 for s in data["sorties"]
             )
         )
+        found = data["sortie_order"]
+        if found is not None:
+            lines.append(
+                f"sortie order   {_minutes(found['flight_time_s'])} and "
+                f"{found['length_m']:.0f} m in all, against "
+                f"{_minutes(found['plain_cut_flight_time_s'])} and "
+                f"{found['plain_cut_length_m']:.0f} m in {found['plain_cut_sorties']} for the "
+                "solver's "
+                f"{data['solver_tour_length_m']:.0f} m tour cut as it is "
+                f"({found['moves']} moves in {found['search_s']:.1f} s)"
+            )
     lines.append("stops          #  sortie  from prev   ETA      sees")
     shown = data["stops"][:25]
     for stop in shown:
