@@ -266,7 +266,20 @@ def _plan_child(dem: str, targets: str, options: dict[str, Any], out: Any) -> No
 
 
 def _read_windows(terrain: Any) -> list[tuple[int, int, int, int]]:
-    return [tuple(terrain.read_window_px)]
+    """The source windows the terrain holds: its blocks, clipped to its grid, or its one
+    window when it was read whole."""
+    col, row, width, height = terrain.read_window_px
+    if terrain.blocks_read is None:
+        return [(col, row, width, height)]
+    bh, bw = terrain.block_px
+    out = []
+    for j, i in np.argwhere(terrain.blocks_read).tolist():
+        c, r = col // bw * bw + i * bw, row // bh * bh + j * bh
+        c0, r0 = max(c, col), max(r, row)
+        c1, r1 = min(c + bw, col + width), min(r + bh, row + height)
+        if c1 > c0 and r1 > r0:
+            out.append((c0, r0, c1 - c0, r1 - r0))
+    return out
 
 
 def _read_child(dem: str, windows: list[tuple[int, int, int, int]], out: Any) -> None:
