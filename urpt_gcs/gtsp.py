@@ -167,8 +167,14 @@ def cover_sets(
     targets_xy: FloatArray,
     ground_m: FloatArray,
     camera: Camera,
+    workers: int | None = 1,
 ) -> BoolArray:
-    """Which targets each viewpoint sees: inside the camera cone and in line of sight."""
+    """Which targets each viewpoint sees: inside the camera cone and in line of sight.
+
+    Every (viewpoint, target) pair within the cone is found at once through a spatial index
+    and tested by one compiled call, its segments shared among ``workers`` threads (None:
+    every core); the answer does not depend on ``workers``.
+    """
     n, m = len(viewpoints_xy), len(targets_xy)
     covers = np.zeros((n, m), dtype=bool)
     if n == 0 or m == 0:
@@ -186,7 +192,7 @@ def cover_sets(
     vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
     eye = np.column_stack([viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)])
     tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
-    seen = line_of_sight(terrain, eye, tgt)
+    seen = line_of_sight(terrain, eye, tgt, workers)
     covers[vp_idx[seen], tg_idx[seen]] = True
     return covers
 
@@ -199,6 +205,7 @@ def build_instance(
     camera: Camera,
     depot_xy: tuple[float, float] | None,
     terrain_max_m: float,
+    workers: int | None = 1,
 ) -> Instance:
     """Candidate viewpoints with verified cover sets, and the distance matrix."""
     nadir = np.asarray(targets_xy, dtype=np.float64)
@@ -216,14 +223,14 @@ def build_instance(
         xy = nadir[own[idx]] + r[:, None] * np.column_stack([np.cos(az[idx]), np.sin(az[idx])])
         eye = np.column_stack([xy, np.full(len(xy), camera.altitude_m)])
         tgt = np.column_stack([nadir[own[idx]], ground_m[own[idx]]])
-        ok = line_of_sight(terrain, eye, tgt)
+        ok = line_of_sight(terrain, eye, tgt, workers)
         points.append(xy[ok])
         owners.append(own[idx[ok]])
         pending[idx[ok]] = False
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
     require_instance_memory(len(viewpoints), len(nadir))
-    covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera)
+    covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera, workers)
     depot_distance = None
     if depot_xy is not None:
         depot = np.asarray(depot_xy, dtype=np.float64)

@@ -81,8 +81,14 @@ class PlanSettings:
     endurance_min: float | None = 20.0
     geofence_margin_m: float = 30.0
     band: int | None = None
+    workers: int | None = None
 
     def __post_init__(self) -> None:
+        if self.workers is not None and self.workers < 1:
+            raise SettingsError(
+                f"--workers {self.workers} is below 1: give a number of threads, or omit it "
+                "to use every core"
+            )
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
             raise SettingsError(
                 f"--fov {self.fov_deg} is outside (0, 90): give the camera half-angle in degrees"
@@ -395,6 +401,7 @@ def plan(
         area.camera,
         site.home_xy,
         area.terrain_max_m,
+        settings.workers,
     )
     stages.lap("viewpoints")
     solver = choose(instance, settings.solver)
@@ -564,7 +571,7 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
         build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
         for s in sorties
     )
-    legs = _check_as_written(site, area, missions, sorties, tour.sees, stop_names)
+    legs = _check_as_written(site, area, missions, sorties, tour.sees, stop_names, settings.workers)
     warnings = check_legs(legs, settings.min_clearance_m)
     stop_ground = area.terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
     warnings += check_height_above_ground(
@@ -610,6 +617,7 @@ def _check_as_written(
     sorties: tuple[Sortie, ...],
     sees: BoolArray,
     stop_names: list[str],
+    workers: int | None,
 ) -> tuple[Leg, ...]:
     """Check the missions as the vehicle will store them, and return their legs.
 
@@ -632,7 +640,9 @@ def _check_as_written(
             area.terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], eye_m
         )
     written = np.vstack(stops)
-    seen = cover_sets(area.terrain, written, site.targets_xy, area.ground_m, written_camera)
+    seen = cover_sets(
+        area.terrain, written, site.targets_xy, area.ground_m, written_camera, workers
+    )
     lost = np.argwhere(sees & ~seen)
     if lost.size:
         k, t = (int(v) for v in lost[0])
