@@ -148,7 +148,14 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ],
         ["cuts 5.0 m into the terrain", "raise --altitude"],
     ),
-    "fov_narrower_than_waypoint_grid": (["--fov", "0.001"], ["--fov 0.001", "1e-7 degree"]),
+    "fov_narrower_than_waypoint_grid": (
+        ["--fov", "0.001", "--position-tolerance", "0"],
+        ["--fov 0.001", "1e-7 degree"],
+    ),
+    "fov_narrower_than_position_tolerance": (
+        ["--fov", "1"],
+        ["--fov 1", "twice the 1.5 m", "lower --position-tolerance"],
+    ),
     "dem_complex": (
         ["--dem", str(BAD / "dem_complex.tif")],
         ["dem_complex.tif", "complex numbers", "real-valued band"],
@@ -226,10 +233,6 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
     "dem_name_too_long": (
         ["--dem", str(BAD / ("d" * 300 + ".tif"))],
         ["DEM", "a name of 304 characters", "too long", "--dem"],
-    ),
-    "demo_300_targets": (
-        ["--targets", str(BAD / "demo_300_targets.csv")],
-        ["300 targets", "GiB", "fewer targets per plan"],
     ),
     "targets_100000": (
         ["--targets", "%targets_100000.csv"],

@@ -6,7 +6,6 @@ import csv
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 from click.testing import CliRunner, Result
 from conftest import DEMO, GTSPLIB, needs_shared
@@ -189,7 +188,8 @@ def test_plan_export_is_read_back_by_bench(tmp_path: Path) -> None:
     assert sorted(p.name for p in exported.parent.iterdir()) == ["demo.gtsp"]
     instance = read_gtsplib(exported)
     assert instance.n_targets == 16 + 1, "one set per target and the home last"
-    assert np.flatnonzero(instance.covers[:, -1]).tolist() == [instance.n_viewpoints - 1]
+    last = instance.covers.viewpoints_of(instance.n_targets - 1).tolist()
+    assert last == [instance.n_viewpoints - 1]
     out = tmp_path / "bench"
     args = ["bench", "gtsplib", str(exported.parent), "--solver", "ortools", "--time-limit", "1"]
     ran = _cli([*args, "--out", str(out)])

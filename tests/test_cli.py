@@ -337,7 +337,7 @@ def test_the_display_ticks_every_second_through_a_long_stage() -> None:
 
 
 def test_the_display_ticks_while_ortools_holds_the_interpreter() -> None:
-    from urpt_gcs.gtsp import Instance, euclidean_matrix
+    from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
     from urpt_gcs.progress import StageProgress
     from urpt_gcs.solvers import SolveSettings, solve
 
@@ -348,7 +348,7 @@ def test_the_display_ticks_while_ortools_holds_the_interpreter() -> None:
     home = np.hypot(*(points - 500.0).T)
     # With a depot, one search for the whole time limit.
     instance = Instance(
-        covers=covers,
+        covers=Covers.from_dense(covers),
         distance=euclidean_matrix(points),
         depot_distance=np.vstack([home, home]),
         points_xy=points,

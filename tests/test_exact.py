@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 from urpt_gcs.solvers import SolveSettings, choose, solve
 from urpt_gcs.solvers.exact import ExactSolver, exact_work, greedy_order, search_exact
 
@@ -31,7 +31,12 @@ def _random_instance(
         home = rng.uniform(0, 100, 2)
         d = np.hypot(pts[:, 0] - home[0], pts[:, 1] - home[1])
         depot_distance = np.vstack([d, d + (rng.uniform(0, 5, n) if asymmetric else 0)])
-    return Instance(covers=covers, distance=dist, depot_distance=depot_distance, points_xy=pts)
+    return Instance(
+        covers=Covers.from_dense(covers),
+        distance=dist,
+        depot_distance=depot_distance,
+        points_xy=pts,
+    )
 
 
 def _brute_force(inst: Instance) -> float:
@@ -40,7 +45,7 @@ def _brute_force(inst: Instance) -> float:
     best = math.inf
     for k in range(1, n + 1):
         for subset in itertools.combinations(range(n), k):
-            if not inst.covers[list(subset)].any(axis=0).all():
+            if inst.uncovered(subset):
                 continue
             for perm in itertools.permutations(subset):
                 if not inst.has_depot and perm[0] != subset[0]:

@@ -1,4 +1,4 @@
-"""Tests for urpt_gcs.gtsp: the dense parts of an instance."""
+"""Tests for urpt_gcs.gtsp: sparse cover sets, the two distance forms, the memory estimate."""
 
 from __future__ import annotations
 
@@ -7,7 +7,14 @@ import pyproj
 import pytest
 from affine import Affine
 
-from urpt_gcs.gtsp import cover_sets, euclidean_matrix, require_instance_memory
+from urpt_gcs.gtsp import (
+    Covers,
+    Instance,
+    cover_pairs,
+    cover_sets,
+    euclidean_matrix,
+    require_instance_memory,
+)
 from urpt_gcs.inputs import MEMORY_BUDGET_ENV, MemoryBudgetError
 from urpt_gcs.terrain import Terrain
 from urpt_gcs.visibility import Camera
@@ -25,9 +32,11 @@ def test_instance_memory_is_refused_naming_viewpoints_and_fix(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setenv(MEMORY_BUDGET_ENV, "1")
-    require_instance_memory(10_000, 300)
-    with pytest.raises(MemoryBudgetError, match=r"20000 viewpoints .* 3\.00 GiB, .* --samples"):
-        require_instance_memory(20_000, 300)
+    # Linear in the viewpoints: 20 000 of them once needed a 3 GiB distance matrix.
+    require_instance_memory(20_000, 300)
+    require_instance_memory(1_000_000, 300)
+    with pytest.raises(MemoryBudgetError, match=r"4000000 viewpoints .* 1\.30 GiB, .* --samples"):
+        require_instance_memory(4_000_000, 300)
 
 
 def test_cover_sets_on_threads_equal_the_serial_ones() -> None:
@@ -54,3 +63,69 @@ def test_cover_sets_on_threads_equal_the_serial_ones() -> None:
     threaded = cover_sets(terrain, viewpoints, targets, ground, camera, workers=4)
     assert serial.sum() > 100
     np.testing.assert_array_equal(serial, threaded)
+    vp, tg = cover_pairs(terrain, viewpoints, targets, ground, camera, workers=4)
+    pairs = np.column_stack([vp, tg])[np.lexsort((tg, vp))]
+    np.testing.assert_array_equal(np.argwhere(serial), pairs)
+
+
+def test_covers_round_trip_dense_pairs_and_rows() -> None:
+    rng = np.random.default_rng(3)
+    dense = rng.random((40, 9)) < 0.3
+    dense[rng.integers(0, 40, 9), np.arange(9)] = True
+    covers = Covers.from_dense(dense)
+    assert np.array_equal(covers.dense(), dense)
+    vp, tg = covers.pairs()
+    assert np.array_equal(np.column_stack([vp, tg]), np.argwhere(dense))
+    shuffled = rng.permutation(len(vp))
+    again = Covers.from_pairs(np.r_[vp[shuffled], vp], np.r_[tg[shuffled], tg], 40, 9)
+    assert np.array_equal(again.ptr, covers.ptr) and np.array_equal(again.target, covers.target)
+    rows = [5, 0, 5, 39]
+    assert np.array_equal(covers.dense(rows), dense[rows])
+    assert np.array_equal(covers.seen(rows), dense[rows].any(axis=0))
+    assert np.array_equal(covers.per_target(), dense.sum(axis=0))
+    assert np.array_equal(covers.per_viewpoint(), dense.sum(axis=1))
+    for t in range(9):
+        assert np.array_equal(covers.viewpoints_of(t), np.flatnonzero(dense[:, t]))
+
+
+def _explicit_and_plane(seed: int, depot: bool) -> tuple[Instance, Instance]:
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 500, (30, 2))
+    vp = np.r_[np.arange(30), rng.integers(0, 30, 20)]
+    tg = np.r_[np.arange(30) % 8, rng.integers(0, 8, 20)]
+    home = (250.0, -40.0) if depot else None
+    plane = Instance.from_cover_pairs(vp, tg, xy, 8, depot_xy=home)
+    explicit = Instance(
+        covers=plane.covers,
+        distance=euclidean_matrix(xy),
+        depot_distance=plane.depot_distance,
+        points_xy=xy,
+        depot_xy=home,
+    )
+    return explicit, plane
+
+
+@pytest.mark.parametrize("depot", [False, True])
+def test_explicit_and_plane_instances_give_the_same_lengths(depot: bool) -> None:
+    explicit, plane = _explicit_and_plane(1, depot)
+    assert plane.distance is None and plane.explicit is False
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        order = rng.permutation(30)[: rng.integers(1, 30)]
+        assert plane.tour_length(order) == pytest.approx(explicit.tour_length(order), rel=1e-12)
+        assert plane.uncovered(order) == explicit.uncovered(order)
+    assert np.array_equal(plane.matrix(), explicit.matrix())
+    assert plane.nbytes() < explicit.nbytes()
+
+
+@pytest.mark.parametrize("solver", ["exact", "heuristic", "ortools"])
+@pytest.mark.parametrize("depot", [False, True])
+def test_solvers_agree_on_explicit_and_plane_forms(solver: str, depot: bool) -> None:
+    from urpt_gcs.solvers import SolveSettings, solve
+
+    explicit, plane = _explicit_and_plane(2, depot)
+    settings = SolveSettings(time_limit_s=2.0 if solver == "ortools" else 10.0, seed=0)
+    a = solve(explicit, solver, settings)
+    b = solve(plane, solver, settings)
+    assert b.length == pytest.approx(a.length, rel=1e-9)
+    assert b.length == pytest.approx(plane.tour_length(b.order), rel=1e-12)

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from urpt_gcs.errors import OutputError, SettingsError
 from urpt_gcs.formats.gtsplib import export_gtsplib, read_gtsplib, read_tour, write_gtsplib
-from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 
 TOURS = sorted((GTSPLIB / "tours").glob("*.tour"))
 needs_gtsplib = needs_shared(GTSPLIB)
@@ -61,7 +61,7 @@ def test_best_known_tour_has_exactly_its_published_length(tour_path: Path) -> No
     instance = read_gtsplib(GTSPLIB / f"{name}.gtsp")
     tour = read_tour(tour_path)
     assert instance.name.lower() == name.lower()  # 40kroa200 says NAME: 40kroA200
-    assert (instance.covers[tour].sum(axis=0) == 1).all(), "one node per set"
+    assert (instance.covers.dense(tour).sum(axis=0) == 1).all(), "one node per set"
     assert instance.tour_length(tour) == int(length) == _best_known()[name]
     assert instance.distance.dtype == np.float64
     assert (instance.distance == np.round(instance.distance)).all()
@@ -165,7 +165,8 @@ def test_triangular_formats_fill_the_matrix(tmp_path: Path, fmt: str) -> None:
         np.fill_diagonal(expected, 0.0)
     assert (instance.distance == expected).all()
     assert instance.points_xy is None
-    assert instance.covers.tolist() == [[True, False], [True, False], [False, True], [False, True]]
+    dense = instance.covers.dense().tolist()
+    assert dense == [[True, False], [True, False], [False, True], [False, True]]
 
 
 def test_asymmetric_full_matrix_and_a_node_in_two_sets(tmp_path: Path) -> None:
@@ -176,7 +177,7 @@ def test_asymmetric_full_matrix_and_a_node_in_two_sets(tmp_path: Path) -> None:
     )
     instance = read_gtsplib(_write(tmp_path, "asym.gtsp", text))
     assert instance.distance.tolist() == [[0, 1, 2], [3, 0, 4], [5, 6, 0]]
-    assert instance.covers[1].all() and instance.n_targets == 2
+    assert instance.covers.dense()[1].all() and instance.n_targets == 2
     assert instance.tour_length([0, 2]) == 2 + 5
 
 
@@ -248,11 +249,13 @@ def _random_instance(seed: int, depot: bool) -> Instance:
     covers = rng.random((n, m)) < 0.45
     covers[rng.integers(0, n, size=m), np.arange(m)] = True
     if not depot:
-        return Instance(covers=covers, distance=euclidean_matrix(points), points_xy=points)
+        return Instance(
+            covers=Covers.from_dense(covers), distance=euclidean_matrix(points), points_xy=points
+        )
     home = rng.uniform(-50.0, 250.0, size=2)
     to_home = np.hypot(*(points - home).T)
     return Instance(
-        covers=covers,
+        covers=Covers.from_dense(covers),
         distance=euclidean_matrix(points),
         depot_distance=np.vstack([to_home, to_home]),
         points_xy=points,
@@ -276,7 +279,7 @@ def _cover_optimum(instance: Instance) -> float:
 def _set_optimum(instance: Instance) -> float:
     """Shortest cycle through one node of each set, by enumeration (the partition form)."""
     d = instance.distance.tolist()
-    sets = [np.flatnonzero(instance.covers[:, t]).tolist() for t in range(instance.n_targets)]
+    sets = [instance.covers.viewpoints_of(t).tolist() for t in range(instance.n_targets)]
     best = math.inf
     for rest in itertools.permutations(sets[1:]):
         for nodes in itertools.product(sets[0], *rest):
@@ -294,13 +297,15 @@ def test_export_round_trip_keeps_the_optimum_to_the_centimetre(
     path = tmp_path_factory.mktemp("rt") / "rt.gtsp"
     path.write_text(write_gtsplib(instance, "rt", comment="round\ntrip"))
     back = read_gtsplib(path)
-    vp, tg = np.nonzero(instance.covers)
+    vp, tg = instance.covers.pairs()
     places = np.vstack([instance.points_xy[vp], [instance.depot_xy] if depot else np.empty((0, 2))])
     nodes = len(vp) + int(depot)
     assert back.n_viewpoints == nodes and back.n_targets == instance.n_targets + int(depot)
     assert back.name == "rt" and back.points_xy is not None
     assert (back.points_xy >= 0).all() and (back.points_xy == np.round(back.points_xy)).all()
-    assert back.covers[np.arange(len(vp)), tg].all(), "node k is the k-th (viewpoint, target)"
+    assert back.covers.dense()[np.arange(len(vp)), tg].all(), (
+        "node k is the k-th (viewpoint, target)"
+    )
     cm = np.rint(100.0 * places)
     assert (back.points_xy == cm - cm.min(axis=0)).all()
     # Every edge is within 2 cm of 100 x the original (rounding of both ends and of nint).
@@ -310,7 +315,7 @@ def test_export_round_trip_keeps_the_optimum_to_the_centimetre(
 
 
 def test_writer_refuses_what_euc_2d_cannot_say(tmp_path: Path) -> None:
-    covers = np.ones((2, 1), dtype=bool)
+    covers = Covers.from_dense(np.ones((2, 1), dtype=bool))
     with pytest.raises(SettingsError, match="positions"):
         write_gtsplib(Instance(covers=covers, distance=np.zeros((2, 2))), "x")
     skewed = Instance(covers=covers, distance=np.ones((2, 2)), points_xy=np.zeros((2, 2)))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import GTSPLIB, needs_shared
 
-from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.clustered import cluster_instance
 from urpt_gcs.solvers.heuristic import HeuristicSolver, SearchSettings, solve_clustered, warm_up
@@ -50,13 +50,15 @@ def random_instance(
     if depot:
         to = np.hypot(*(xy - rng.random(2) * 100.0).T)
         depot_distance = np.vstack([to + 0.5 * z, to])
-    return Instance(covers=covers, distance=distance, depot_distance=depot_distance)
+    return Instance(
+        covers=Covers.from_dense(covers), distance=distance, depot_distance=depot_distance
+    )
 
 
 def brute_force_partition(instance: Instance) -> float:
     """Every order of the targets times every choice of one viewpoint each (disjoint covers)."""
-    members = [np.flatnonzero(instance.covers[:, t]) for t in range(instance.n_targets)]
-    dist = instance.distance
+    members = [instance.covers.viewpoints_of(t) for t in range(instance.n_targets)]
+    dist = instance.matrix()
     best = math.inf
     first = [] if instance.has_depot else [0]
     rest = range(len(first), instance.n_targets)
@@ -77,7 +79,7 @@ def brute_force_covers(instance: Instance) -> float:
     best = math.inf
     for length in range(1, instance.n_targets + 1):
         for seq in itertools.permutations(range(instance.n_viewpoints), length):
-            if instance.covers[list(seq)].any(axis=0).all():
+            if not instance.uncovered(seq):
                 best = min(best, instance.tour_length(seq))
     return best
 
@@ -133,7 +135,7 @@ def test_other_search_settings_stay_exact(search: SearchSettings, asymmetric: bo
 def test_tiny_instances(m: int, depot: bool) -> None:
     if m == 0:
         instance = Instance(
-            covers=np.zeros((2, 0), dtype=bool),
+            covers=Covers.from_dense(np.zeros((2, 0), dtype=bool)),
             distance=np.zeros((2, 2)),
             depot_distance=np.ones((2, 2)) if depot else None,
         )
@@ -199,3 +201,39 @@ def test_reaches_best_known_on_gtsplib(name: str, best_known: int) -> None:
     instance = gtsplib.read_gtsplib(GTSPLIB / f"{name}.gtsp")
     tour = HeuristicSolver().solve(instance, SETTINGS)
     assert tour.length == best_known
+
+
+def plane_instance(m: int, per_target: int, seed: int = 0) -> Instance:
+    """``m`` targets on the plane, each seen by ``per_target`` viewpoints around it, some of
+    which also see a neighbouring target; a depot in a corner."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((m, 2)) * 100.0 * math.sqrt(m)
+    owner = np.repeat(np.arange(m), per_target)
+    xy = centres[owner] + rng.normal(scale=15.0, size=(len(owner), 2))
+    extra = rng.random(len(owner)) < 0.2
+    vp = np.r_[np.arange(len(owner)), np.flatnonzero(extra)]
+    tg = np.r_[owner, (owner[extra] + 1) % m]
+    return Instance.from_cover_pairs(vp, tg, xy, m, depot_xy=(0.0, 0.0))
+
+
+def test_2000_clusters_on_the_plane_within_the_time_limit_and_linear_memory() -> None:
+    from urpt_gcs.solvers.clustered import partition_nodes
+    from urpt_gcs.solvers.heuristic import _BYTES_PER_NODE, _prepare
+
+    instance = plane_instance(2000, 6)
+    warm_up()
+    limit = 3.0
+    started = time.perf_counter()
+    tour = HeuristicSolver().solve(instance, SolveSettings(time_limit_s=limit, seed=0))
+    assert time.perf_counter() - started <= 1.1 * limit
+    assert not instance.uncovered(tour.order)
+    # Nothing node-by-node: every array of the instance and of the search is linear.
+    n = partition_nodes(instance)
+    p = _prepare(cluster_instance(instance), SearchSettings().neighbours)
+    assert p.d.size == p.dt.size == p.setd.size == 0
+    assert p.nbr.shape == (2001, 16)
+    assert p.nbytes <= 64 * n and instance.nbytes() <= 128 * instance.n_viewpoints
+    # The budget check counts bytes per node: well under 1 % of one dense node matrix.
+    assert _BYTES_PER_NODE * n < 0.01 * 8.0 * n * n
+    # Far shorter than visiting the targets in file order (random places).
+    assert tour.length < 0.2 * instance.tour_length(np.arange(0, 6 * 2000, 6))

@@ -46,7 +46,7 @@ from urpt_gcs.mission import (
 )
 from urpt_gcs.readback import WireItem, compare, wire_items
 from urpt_gcs.sitl.server import SitlServer
-from urpt_gcs.sitl.store import Item, ardupilot_stored
+from urpt_gcs.sitl.store import Item, ardupilot_stored, px4_stored
 
 WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
@@ -589,3 +589,90 @@ def test_simulator_storage_passes_and_any_nudge_fails(
         got = replace(got, z=got.z + 0.05)  # beyond the 1 cm tolerance of either form
     check = compare([HOME, sent], [HOME, got], "ardupilot")
     assert check.equal == (nudge is None)
+
+
+# --- PX4's read-back (as PX4 v1.16 SITL returned the demo, see urpt_gcs/readback.py) ---------
+
+RELATIVE_INT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+CAPTURE = mavlink.MAV_CMD_IMAGE_START_CAPTURE
+PX4_SENT = [
+    WireItem(0, RELATIVE, TAKEOFF, 1, 1, 0.0, 0.0, 0.0, 0.0, 476887616, 94230907, 68.87),
+    WireItem(1, 2, CAPTURE, 0, 1, 0.0, 0.0, 1.0, 0.0, 0, 0, 0.0),
+    WireItem(2, RELATIVE, WAYPOINT, 0, 1, 2.0, 0.0, 0.0, math.nan, 476888434, 94238428, 68.87),
+]
+# Seen: frame 3 as 6, the altitude as float32, ``current`` 1 on the item PX4 is at.
+PX4_GOT = [
+    replace(PX4_SENT[0], frame=RELATIVE_INT, z=68.87000274658203),
+    PX4_SENT[1],
+    replace(PX4_SENT[2], frame=RELATIVE_INT, z=68.87000274658203),
+]
+
+
+def test_what_px4_normalises_is_equal() -> None:
+    assert compare(PX4_SENT, PX4_GOT, "px4").equal
+    assert compare(PX4_SENT, PX4_GOT, "px4").warnings == ()
+    # ArduPilot returns frame 3 as sent and replaces seq 0 with home: PX4's form differs.
+    assert not compare(PX4_SENT, PX4_GOT, "ardupilot").equal
+
+
+@pytest.mark.parametrize(
+    ("seq", "changes"),
+    [
+        (0, {"frame": mavlink.MAV_FRAME_GLOBAL_INT}),  # 3 comes back as 6, never 5
+        (0, {"frame": mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT}),  # nor as sent
+        (0, {"z": 68.85}),
+        (0, {"x": 476887617}),
+        (1, {"param3": 2.0}),  # a command without a location comes back verbatim
+        (1, {"frame": mavlink.MAV_FRAME_GLOBAL}),
+        (2, {"param1": 3.0}),  # PX4 keeps the hold as sent (ArduPilot: whole seconds)
+        (2, {"param4": 0.0}),  # NaN yaw stays NaN on PX4 (ArduPilot: 0)
+        (2, {"y": 94238427}),
+        (2, {"autocontinue": 0}),
+        (2, {"command": mavlink.MAV_CMD_NAV_LOITER_UNLIM}),
+    ],
+)
+def test_every_change_px4_does_not_make_is_a_mismatch(seq: int, changes: dict[str, Any]) -> None:
+    got = list(PX4_GOT)
+    got[seq] = replace(got[seq], **changes)
+    check = compare(PX4_SENT, got, "px4")
+    assert not check.equal
+    assert check.mismatches[0].startswith(f"seq {seq} ")
+
+
+def test_px4_drops_and_wraps_are_equal_and_nothing_else() -> None:
+    """Seen on PX4 SITL: NAV_WAYPOINT's param3 as 0, a yaw of -90 as 270, 400 as 39.99999."""
+    sent = [replace(PX4_SENT[2], seq=0, param3=2.0, param4=-90.0, frame=0, z=480.8)]
+    got = [replace(sent[0], param3=0.0, param4=270.0, frame=mavlink.MAV_FRAME_GLOBAL_INT)]
+    assert compare(sent, got, "px4").equal
+    wrapped = [replace(sent[0], param4=400.0)], [replace(got[0], param4=39.9999885559082)]
+    assert compare(*wrapped, "px4").equal
+    assert not compare(sent, [replace(got[0], param4=271.0)], "px4").equal
+    assert not compare(sent, [replace(got[0], param2=1.0)], "px4").equal
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    xy=coordinates,
+    z=st.floats(-500.0, 8000.0),
+    hold=st.floats(0.0, 3600.0),
+    yaw=st.one_of(st.just(math.nan), st.floats(-720.0, 720.0)),
+    frame=st.sampled_from([RELATIVE, RELATIVE_INT, 0, 5]),
+    nudge=st.sampled_from(["x", "y", "z", "hold", None]),
+)
+def test_simulated_px4_storage_passes_and_any_nudge_fails(
+    xy: tuple[int, int], z: float, hold: float, yaw: float, frame: int, nudge: str | None
+) -> None:
+    """The simulator's model of PX4's storage and the comparison agree."""
+    sent = _item(seq=0, x=xy[0], y=xy[1], z=z, param1=hold, param4=yaw, frame=frame)
+    stored = px4_stored(Item(WAYPOINT, frame, hold, 0.0, 0.0, yaw, xy[0], xy[1], z))
+    got = WireItem(0, stored.frame, WAYPOINT, 0, 1, *stored.params, stored.x, stored.y, stored.z)
+    if nudge == "x":
+        got = replace(got, x=got.x + 1)
+    elif nudge == "y":
+        got = replace(got, y=got.y - 1)
+    elif nudge == "z":
+        got = replace(got, z=got.z + 0.05)
+    elif nudge == "hold":
+        got = replace(got, param1=got.param1 + 0.5)
+    assert compare([sent], [got], "px4").equal == (nudge is None)

@@ -41,6 +41,8 @@ DEMO_PLAN = DEMO / "out" / "mission.plan"
 SITE, TARGETS = DEMO / "site.tif", DEMO / "targets.kml"
 # The README saw 10x; 20x keeps the file within its budget and flies as well.
 SPEEDUP = 20.0
+# How close the plan's flight-time estimate must come to a flight on the real firmware.
+ESTIMATE_TOLERANCE = 0.10
 needs_sitl = pytest.mark.skipif(
     not os.access(BINARY, os.X_OK), reason=f"no ArduCopter SITL at {BINARY}"
 )
@@ -131,6 +133,17 @@ def _fly_and_judge(
     return flight
 
 
+def _estimate_s(summary: Path, sortie: int) -> float:
+    """The plan's estimate of one sortie's flight time, arming to the disarm after landing."""
+    return float(json.loads(summary.read_text())["sorties"][sortie - 1]["flight_time_s"])
+
+
+def _check_estimate(name: str, flight: Flight, estimate_s: float) -> None:
+    off = flight.sim_time_s / estimate_s - 1.0
+    print(f"{name}: estimate {estimate_s:.1f} s, flown {flight.sim_time_s:.1f} s ({off:+.1%})")
+    assert abs(off) <= ESTIMATE_TOLERANCE
+
+
 # --- flights ---------------------------------------------------------------------------------
 
 
@@ -165,7 +178,15 @@ def test_a_sortie_split_and_two_replays_in_a_row(
         targets = _sortie_targets(plans["summary"], sortie, tmp_path)
         flight = _fly_and_judge(plan, sitl, targets)
         assert flight.vehicle.describe() == f"ArduPilot 4.7.0-dev ({sitl.url})"
-        assert flight.sim_time_s > 100.0
+        _check_estimate(f"sortie {sortie}", flight, _estimate_s(plans["summary"], sortie))
+
+
+@needs_sitl
+def test_the_demo_flies_the_estimated_flight_time(sitl: RunningSitl) -> None:
+    """ArduCopter's own take-off, S-curve legs, RTL at WPNAV_SPEED, loiter and landing take
+    what the plan's flight model says (summary.json), within 10 %."""
+    flight = _fly_and_judge(DEMO_PLAN, sitl)
+    _check_estimate("demo", flight, _estimate_s(DEMO / "out" / "summary.json", 1))
 
 
 @needs_sitl

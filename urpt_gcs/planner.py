@@ -19,6 +19,7 @@ import pyproj
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance, cover_sets, instance_bytes
 from urpt_gcs.inputs import require_memory
+from urpt_gcs.margin import robust_tour
 from urpt_gcs.mission import (
     GeoPoint,
     Mission,
@@ -80,6 +81,7 @@ class PlanSettings:
     strict: bool = False
     endurance_min: float | None = 20.0
     geofence_margin_m: float = 30.0
+    position_tolerance_m: float = 1.5
     band: int | None = None
     workers: int | None = None
 
@@ -88,6 +90,12 @@ class PlanSettings:
             raise SettingsError(
                 f"--workers {self.workers} is below 1: give a number of threads, or omit it "
                 "to use every core"
+            )
+        if not (
+            math.isfinite(self.position_tolerance_m) and 0.0 <= self.position_tolerance_m <= 20.0
+        ):
+            raise SettingsError(
+                f"--position-tolerance {self.position_tolerance_m} m is out of range; use 0 to 20 m"
             )
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
             raise SettingsError(
@@ -411,6 +419,18 @@ def plan(
     stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
     tour = solve(instance, solver, settings.solve)
     stages.lap("solve")
+    stages.say(f"stops seeing from anywhere within {settings.position_tolerance_m:g} m")
+    tour, margin_warnings = robust_tour(
+        area.terrain,
+        site.targets_xy,
+        area.ground_m,
+        area.camera,
+        tour,
+        site.home_xy,
+        settings.position_tolerance_m,
+        site.names,
+    )
+    stages.lap("margin")
     stages.say("checking the missions")
     flight = _fly(site, area, tour, settings)
     stages.lap("checks")
@@ -436,7 +456,7 @@ def plan(
         geofence_latlon=flight.geofence_latlon,
         flight_time_s=sum(s.flight_time_s for s in flight.sorties),
         timings_s=stages.timings_s,
-        warnings=tuple(flight.warnings),
+        warnings=(*margin_warnings, *flight.warnings),
     )
 
 
@@ -524,7 +544,7 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
             "raise it or use --clearance"
         )
     camera = Camera(altitude_m=altitude, fov_deg=settings.fov_deg)
-    _check_cone_width(camera, ground, site.names)
+    _check_cone_width(camera, ground, site.names, settings.position_tolerance_m)
     return _Area(terrain, ground, home_ground, top, camera)
 
 
@@ -595,18 +615,27 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
     )
 
 
-def _check_cone_width(camera: Camera, ground_m: FloatArray, names: list[str]) -> None:
-    """Refuse a camera cone too narrow for a waypoint to be placed inside it."""
+def _check_cone_width(
+    camera: Camera, ground_m: FloatArray, names: list[str], tolerance_m: float
+) -> None:
+    """Refuse a camera cone too narrow for a waypoint to be placed inside it, or for the
+    vehicle to photograph from within ``tolerance_m`` of it."""
     cone = camera.cone_radius_m(ground_m)
     i = int(np.argmin(cone))
-    if cone[i] >= MIN_CONE_RADIUS_M:
+    least = max(MIN_CONE_RADIUS_M, 2.0 * tolerance_m)
+    if cone[i] >= least:
         return
     height = camera.altitude_m - float(ground_m[i])
-    need = math.degrees(math.atan(MIN_CONE_RADIUS_M / height))
+    need = math.ceil(math.degrees(math.atan(least / height)) * 1000) / 1000
+    seen = f"--fov {camera.fov_deg:g} sees only {cone[i] * 100:.2g} cm around target '{names[i]}'"
+    if least > MIN_CONE_RADIUS_M:
+        raise SettingsError(
+            f"{seen}, under twice the {tolerance_m:g} m the vehicle may stop off its waypoint "
+            f"(--position-tolerance): use --fov {need:g} or more, or lower --position-tolerance"
+        )
     raise SettingsError(
-        f"--fov {camera.fov_deg:g} sees only {cone[i] * 100:.2g} cm around target "
-        f"'{names[i]}', finer than a waypoint can be placed (1e-7 degree, about 1 cm): "
-        f"use --fov {math.ceil(need * 1000) / 1000:g} or more"
+        f"{seen}, finer than a waypoint can be placed (1e-7 degree, about 1 cm): "
+        f"use --fov {need:g} or more"
     )
 
 
@@ -655,13 +684,15 @@ def _check_as_written(
 
 
 def flight_model(settings: PlanSettings) -> FlightModel:
-    """How the flight-time estimate sees the vehicle, from the settings."""
-    return FlightModel(
+    """How the flight-time estimate sees the vehicle: its firmware's model at the settings'
+    speeds."""
+    make = FlightModel.arducopter if settings.mission.firmware == "ardupilot" else FlightModel.px4
+    return make(
         cruise_m_s=settings.mission.cruise_speed_m_s,
+        hold_s=settings.mission.hold_s,
         climb_m_s=settings.climb_m_s,
         descent_m_s=settings.descent_m_s,
         accel_m_s2=settings.accel_m_s2,
-        hold_s=settings.mission.hold_s,
     )
 
 

@@ -16,7 +16,17 @@ that comes back changed in a way the vehicle would fly differently (a truncated 
 accepted with a warning. Anything else is a mismatch: command, frame, params to float32,
 latitude/longitude to 1e-7 degrees, altitude to 1 cm, autocontinue.
 
-PX4 returns what it was sent; only ``current`` and NaN == NaN are allowed for.
+PX4 (v1.16, seen against its SITL) keeps a located item as a position with an "altitude is
+relative" flag, and a command without a location (frame 2, MISSION) verbatim. Treated as equal:
+
+* frame 3 (GLOBAL_RELATIVE_ALT) as 6, 0 (GLOBAL) as 5; 5 and 6 as sent (PX4 refuses the
+  terrain frames 10 and 11 with MAV_MISSION_UNSUPPORTED_FRAME, so they never come back);
+* the params PX4 drops as 0: NAV_TAKEOFF's params 1-3, NAV_WAYPOINT's param3 (pass radius),
+  NAV_LAND's params 1 and 3;
+* a yaw (param4 of NAV_TAKEOFF, NAV_WAYPOINT and NAV_LAND) as the same heading in [0, 360)
+  degrees, through float32 radians (-90 as 270, 400 as 39.99999);
+* the altitude as float32; ``current`` is not compared (PX4 marks its current item).
+Anything else must come back as sent.
 """
 
 from __future__ import annotations
@@ -139,6 +149,32 @@ _AP_FRAME = {
 }
 
 
+# Seen on PX4 v1.16 SITL: a located item comes back in the _INT frame of its altitude's kind
+# (relative or above mean sea level).
+_PX4_FRAME = {
+    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mavlink.MAV_FRAME_GLOBAL: mavlink.MAV_FRAME_GLOBAL_INT,
+}
+# Headings within this are equal: PX4's float32 radians move 400 degrees to 39.99999.
+HEADING_TOLERANCE_DEG = 1e-3
+
+
+def _heading(value: float) -> float:
+    """A yaw as PX4 keeps it: radians wrapped to [0, 2 pi), returned in degrees."""
+    return value % 360.0 if math.isfinite(value) else value
+
+
+def _same_heading(a: float, b: float) -> bool:
+    return abs((a - b + 180.0) % 360.0 - 180.0) <= HEADING_TOLERANCE_DEG
+
+
+_PX4_STORED: dict[int, _Stored] = {
+    mavlink.MAV_CMD_NAV_TAKEOFF: _Stored((_drop, _drop, _drop, _heading), True),
+    mavlink.MAV_CMD_NAV_WAYPOINT: _Stored((_f32, _f32, _drop, _heading), True),
+    mavlink.MAV_CMD_NAV_LAND: _Stored((_drop, _f32, _drop, _heading), True),
+}
+
+
 def _ap_stored_z(z: float) -> float:
     """int32(z * 100.0f) centimetres, read back as alt / 100.0f."""
     return float(np.float32(int(np.float32(z) * np.float32(100.0))) / np.float32(100.0))
@@ -195,7 +231,7 @@ def compare(sent: Sequence[WireItem], got: Sequence[WireItem], firmware: Firmwar
         if b.seq != a.seq or b.command != a.command:
             mismatches.append(f"{where}: read back as seq {b.seq} {command_name(b.command)}")
             continue
-        stored = _AP_STORED.get(a.command) if ardupilot else None
+        stored = (_AP_STORED if ardupilot else _PX4_STORED).get(a.command)
         _compare_item(a, b, stored, ardupilot, where, mismatches, warnings)
     return Comparison(tuple(mismatches), tuple(warnings))
 
@@ -213,8 +249,7 @@ def _compare_item(
         mismatches.append(f"{where}: {field} sent {sent}, read back {got}")
 
     frame_a, frame_b = a.frame, b.frame
-    if ardupilot:
-        frame_a = _AP_FRAME.get(frame_a, frame_a)
+    frame_a = (_AP_FRAME if ardupilot else _PX4_FRAME).get(frame_a, frame_a)
     if frame_a != frame_b and not (stored is not None and not stored.location):
         differs("frame", a.frame, b.frame)
     if a.autocontinue != b.autocontinue:
@@ -225,8 +260,11 @@ def _compare_item(
             continue
         if ardupilot and index == 3 and math.isnan(sent) and got == 0.0:
             continue
-        if stored is not None and _same_param(stored.params[index](sent), got):
-            if stored.params[index] is not _drop:
+        store = stored.params[index] if stored is not None else None
+        if store is _heading and _same_heading(_heading(sent), got):
+            continue  # the same heading
+        if store is not None and _same_param(store(sent), got):
+            if store is not _drop:
                 warnings.append(f"{where}: the vehicle keeps {name} {sent:g} as {got:g}")
             continue
         differs(name, sent, got)
@@ -243,6 +281,6 @@ def _compare_item(
         return
     if stored is not None and (not stored.location and b.z == 0.0):
         return
-    if stored is not None and stored.location and _ap_stored_z(a.z) == _f32(b.z):
+    if ardupilot and stored is not None and stored.location and _ap_stored_z(a.z) == _f32(b.z):
         return
     differs("z (param7)", a.z, b.z)

@@ -79,7 +79,7 @@ def flown_stops(plan: Plan) -> list[FlownStop]:
                     eta_s=round(eta, 1),
                 )
             )
-            eta += model.hold_s
+            eta += model.stop_s
             previous = xy
     return stops
 

@@ -29,7 +29,7 @@ import pyproj
 from affine import Affine
 
 from urpt_gcs.bench import rows_csv
-from urpt_gcs.gtsp import Instance, build_instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Instance, build_instance
 from urpt_gcs.output import write_all
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.approx import paper_path
@@ -144,7 +144,7 @@ def paper_lower_bound(targets_xy: FloatArray, fov_deg: float) -> float:
 def naive_length(targets_xy: FloatArray) -> float:
     """Shortest closed tour over the targets' nadir points (fly over every target)."""
     m = len(targets_xy)
-    tsp = Instance(covers=np.eye(m, dtype=bool), distance=euclidean_matrix(targets_xy))
+    tsp = Instance(covers=Covers.identity(m), points_xy=np.asarray(targets_xy, dtype=np.float64))
     found = solve_exact(tsp)
     assert found is not None
     return found[1]

@@ -71,6 +71,14 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
     help="Refuse a plan whose legs pass closer than this to the terrain, metres.",
 )
 @click.option(
+    "--position-tolerance",
+    type=float,
+    default=1.5,
+    show_default=True,
+    help="How far from a waypoint the vehicle may take its photo, metres: every stop must see "
+    "its targets from anywhere that close (0: from the waypoint only).",
+)
+@click.option(
     "--max-agl",
     type=float,
     default=120.0,
@@ -151,6 +159,7 @@ def plan_command(
     altitude: float | None,
     clearance: float,
     min_clearance: float,
+    position_tolerance: float,
     max_agl: float,
     strict: bool,
     endurance: float,
@@ -186,6 +195,7 @@ def plan_command(
             altitude_m=altitude,
             clearance_m=clearance,
             min_clearance_m=min_clearance,
+            position_tolerance_m=position_tolerance,
             max_agl_m=max_agl,
             strict=strict,
             endurance_min=endurance,

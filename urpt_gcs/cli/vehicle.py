@@ -183,6 +183,16 @@ def sitl_group(
     help="Start ArduCopter SITL (the arducopter binary or its folder; alone: "
     "$URPT_ARDUPILOT) at the plan's home, fly on it, stop it.",
 )
+@click.option(
+    "--px4",
+    "px4",
+    is_flag=False,
+    flag_value="",
+    default=None,
+    metavar="PATH",
+    help="Start PX4's SITL from PATH (the folder with run.sh; without PATH, $URPT_PX4) and "
+    "fly the PX4 mission on it at --speedup.",
+)
 def sitl_replay_command(
     dem: Path,
     targets: Path,
@@ -194,15 +204,17 @@ def sitl_replay_command(
     timeout: float | None,
     connect: str | None,
     ardupilot: str | None,
+    px4: str | None,
 ) -> None:
-    """Fly a mission via MAVSDK on the simulated copter or ArduCopter SITL; check photos and
-    clearance on the DEM.
+    """Fly a mission via MAVSDK on the simulated copter, ArduCopter SITL or PX4 SITL; check
+    photos and clearance on the DEM.
 
     Each sortie is checked on the targets it was planned to photograph; several sorties are
     also checked together on every target of --targets.
     """
     from urpt_gcs.sitl.ardupilot_sitl import ENV_VAR, resolve_binary
     from urpt_gcs.sitl.judge import report_text, set_report_text
+    from urpt_gcs.sitl.px4_sitl import find_build
     from urpt_gcs.sitl.replay import ReplaySettings, mission_files, replay, replay_set
 
     progress = terminal_progress()
@@ -211,6 +223,7 @@ def sitl_replay_command(
         if ardupilot is not None:
             binary = resolve_binary(ardupilot or os.environ.get(ENV_VAR))
         settings = ReplaySettings(
+            px4=find_build(px4) if px4 is not None else None,
             speedup=speedup,
             fov_deg=fov,
             min_clearance_m=min_clearance,

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 from urpt_gcs.inputs import GTSPLIB_MAX_BYTES, read_capped
 from urpt_gcs.output import check_file, commit
 from urpt_gcs.terrain import FloatArray
@@ -277,7 +277,9 @@ def read_gtsplib(path: Path) -> Instance:
         distance = _coordinate_distances(kind, points)
     covers = _covers(parsed, n)
     name = parsed.header.get("NAME", (path.stem, 0))[0] or path.stem
-    return Instance(covers=covers, distance=distance, points_xy=points, name=name)
+    return Instance(
+        covers=Covers.from_dense(covers), distance=distance, points_xy=points, name=name
+    )
 
 
 def read_tour(path: Path) -> list[int]:
@@ -321,7 +323,8 @@ def _positions(instance: Instance) -> FloatArray:
             "the instance lacks viewpoint or depot positions: only a planning instance can be "
             "written as a EUC_2D GTSPLIB file"
         )
-    pairs = [(instance.distance, euclidean_matrix(points))]
+    # On the plane the distances are Euclidean by construction; a matrix must be checked.
+    pairs = [] if instance.distance is None else [(instance.distance, euclidean_matrix(points))]
     if instance.depot_distance is not None and instance.depot_xy is not None:
         to_depot = np.hypot(*(points - np.asarray(instance.depot_xy)).T)
         pairs.append((instance.depot_distance, np.vstack([to_depot, to_depot])))
@@ -358,7 +361,7 @@ def write_gtsplib(instance: Instance, name: str, comment: str = "") -> str:
         The instance has no positions, or distances EUC_2D cannot express.
     """
     points = _positions(instance)
-    vp, tg = np.nonzero(instance.covers)
+    vp, tg = instance.covers.pairs()
     m = instance.n_targets
     xy = np.vstack([points[vp], points[instance.n_viewpoints :]])
     cm = np.rint(xy * 100.0).astype(np.int64)

@@ -7,6 +7,7 @@ that waypoint, after its hold), then the next navigation command starts.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -31,6 +32,66 @@ NAV_COMMANDS = frozenset(
 FOREVER_S = float("inf")
 
 
+@dataclass(frozen=True, slots=True)
+class SCurve:
+    """Speed along a straight leg from rest to rest, as ArduCopter 4.x's S-curves fly it.
+
+    The acceleration builds up at ``jerk_m_s3`` to at most ``accel_m_s2`` and eases off to
+    zero at ``peak_m_s``: the leg's speed when it is long enough, else the highest speed its
+    length allows. Braking mirrors it. Build it with :meth:`for_leg`.
+    """
+
+    length_m: float
+    peak_m_s: float
+    accel_m_s2: float
+    jerk_m_s3: float
+    ramp_s: float
+    duration_s: float
+
+    @staticmethod
+    def ramp_time_s(speed_m_s: float, accel_m_s2: float, jerk_m_s3: float) -> float:
+        """Time from rest to ``speed_m_s``; speeding up covers half that times the speed."""
+        a, j = accel_m_s2, jerk_m_s3
+        if speed_m_s <= a * a / j:
+            return 2.0 * math.sqrt(speed_m_s / j)
+        return speed_m_s / a + a / j
+
+    @classmethod
+    def for_leg(
+        cls, length_m: float, speed_m_s: float, accel_m_s2: float, jerk_m_s3: float
+    ) -> SCurve:
+        """The profile of a leg of ``length_m`` at ``speed_m_s``."""
+
+        def ramp(v: float) -> float:
+            return cls.ramp_time_s(v, accel_m_s2, jerk_m_s3)
+
+        peak = speed_m_s
+        if peak * ramp(peak) > length_m:
+            low, high = 0.0, speed_m_s
+            for _ in range(60):  # bisection: the ramps' length grows with the peak speed
+                mid = 0.5 * (low + high)
+                low, high = (mid, high) if mid * ramp(mid) < length_m else (low, mid)
+            peak = 0.5 * (low + high)
+        duration = length_m / peak + ramp(peak) if peak > 0.0 else 0.0
+        return cls(length_m, peak, accel_m_s2, jerk_m_s3, ramp(peak), duration)
+
+    def speed_at(self, time_s: float) -> float:
+        """Speed ``time_s`` into the leg."""
+        if time_s <= 0.0 or time_s >= self.duration_s:
+            return 0.0
+        u = min(time_s, self.duration_s - time_s, self.ramp_s)  # into a ramp, from rest
+        j = self.jerk_m_s3
+        # How long the acceleration builds up (0 for an unlimited jerk: a trapezoid).
+        jerk_s = min(self.accel_m_s2 / j, self.ramp_s / 2.0)
+        if u >= self.ramp_s:
+            return self.peak_m_s
+        if u <= jerk_s:
+            return 0.5 * j * u * u
+        if u >= self.ramp_s - jerk_s:
+            return self.peak_m_s - 0.5 * j * (self.ramp_s - u) ** 2
+        return self.accel_m_s2 * (u - 0.5 * jerk_s)
+
+
 @dataclass(slots=True)
 class Step:
     """Fly to a point (None keeps the current east/north), then hold or land."""
@@ -43,6 +104,17 @@ class Step:
     takeoff: bool = False
     speed_m_s: float | None = None
     arrived: bool = False
+    # The horizontal profile of the leg to this step once it has started, and the time and
+    # distance flown along it.
+    profile: SCurve | None = None
+    leg_s: float = 0.0
+    along_m: float = 0.0
+    # The same for a climb or descent to this step's altitude (not a landing's descent).
+    climb: SCurve | None = None
+    climb_s: float = 0.0
+    climbed_m: float = 0.0
+    # Time on the ground after a landing step touched down.
+    landed_s: float = 0.0
 
 
 @dataclass(slots=True)

@@ -4,13 +4,15 @@ No sockets here: :meth:`Vehicle.step` advances simulated time, the ``command``/`
 methods are what COMMAND_LONG and SET_MODE do, and what the vehicle has to say (status text,
 mission progress, photos) collects in :attr:`Vehicle.events` for the server to send.
 
-The copter flies straight lines from rest to rest: horizontally it accelerates and brakes at
-``WPNAV_ACCEL`` with the mission's DO_CHANGE_SPEED (else ``WPNAV_SPEED``) between, and
+The copter flies straight lines from rest to rest: horizontally on an S-curve of speed, as
+ArduCopter 4.x does, its acceleration built up at ``WPNAV_JERK`` and held within
+``WPNAV_ACCEL``, with the mission's DO_CHANGE_SPEED (else ``WPNAV_SPEED``) between, and it
 returns home at ``RTL_SPEED`` (else ``WPNAV_SPEED``: ArduCopter's RTL starts its waypoint
 controller afresh, whatever the mission set); vertically it climbs at ``WPNAV_SPEED_UP``
-and descends at ``WPNAV_SPEED_DN`` and, below ``LAND_ALT_LOW``, at ``LAND_SPEED``. It reaches
-each waypoint exactly. Positions are metres
-east/north of home on a sphere of the WGS84 equatorial radius, as ArduPilot's Location does.
+and descends at ``WPNAV_SPEED_DN`` and, below ``LAND_ALT_LOW``, at ``LAND_SPEED``, changing
+its climb rate at ``WPNAV_ACCEL_Z``. It reaches each waypoint exactly, and disarms
+:data:`LAND_DETECT_S` after touching down. Positions are metres east/north of home on a
+sphere of the WGS84 equatorial radius, as ArduPilot's Location does.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.sitl.autopilot import Plan, Step, mission_steps, rtl_steps
+from urpt_gcs.sitl.autopilot import Plan, SCurve, Step, mission_steps, rtl_steps
 from urpt_gcs.sitl.events import Current, Event, Photo, PhotoTaken, Reached, Text
 from urpt_gcs.sitl.params import (
     AUTO_OPTION_ALLOW_ARMING,
@@ -30,6 +32,9 @@ from urpt_gcs.sitl.settings import VehicleSettings
 from urpt_gcs.sitl.store import Home, MissionStore
 
 EARTH_RADIUS_M = 6_378_137.0
+# ArduCopter's land detector: on ArduCopter 4.7 SITL the disarm after an RTL came 2.5-3.1 s
+# after the copter reached the ground.
+LAND_DETECT_S = 3.0
 # COMPONENT_ARM_DISARM param2 that forces a disarm in flight.
 FORCE_DISARM = 21196.0
 HOVER_MODES = frozenset(
@@ -82,6 +87,7 @@ class Vehicle:
         self.east_m = self.north_m = self.alt_m = 0.0
         self.velocity = (0.0, 0.0, 0.0)  # east, north, up; m/s
         self.ground_speed_m_s = 0.0
+        self.climb_rate_m_s = 0.0
         self.auto_armed = False
         self.landed_for_s = 0.0
         self.speed_m_s: float | None = None
@@ -134,6 +140,14 @@ class Vehicle:
     def accel_m_s2(self) -> float:
         """WPNAV_ACCEL in m/s/s."""
         return self.params["WPNAV_ACCEL"] / 100.0
+
+    def jerk_m_s3(self) -> float:
+        """WPNAV_JERK in m/s/s/s."""
+        return self.params["WPNAV_JERK"]
+
+    def climb_accel_m_s2(self) -> float:
+        """WPNAV_ACCEL_Z in m/s/s."""
+        return self.params["WPNAV_ACCEL_Z"] / 100.0
 
     def climb_m_s(self) -> float:
         """WPNAV_SPEED_UP in m/s."""
@@ -313,15 +327,19 @@ class Vehicle:
             if step.hold_s <= 0.0:
                 plan.steps.pop(0)
             return
-        if self._move(step, dt_s):
-            step.arrived = True
-            if step.land:
-                # Touch-down ends the flight: ArduCopter disarms once landed in LAND/RTL.
+        if step.land and step.arrived:
+            # On the ground: ArduCopter disarms once its land detector agrees, in LAND/RTL.
+            step.landed_s += dt_s
+            self.velocity = (0.0, 0.0, 0.0)
+            if step.landed_s >= LAND_DETECT_S:
                 if plan.seq is not None:
                     self.events.append(Reached(plan.seq))
                 self._plan = None
                 self.disarm(why="landed")
-            elif step.hold_s <= 0.0:
+            return
+        if self._move(step, dt_s):
+            step.arrived = True
+            if not step.land and step.hold_s <= 0.0:
                 plan.steps.pop(0)
 
     def _move(self, step: Step, dt_s: float) -> bool:
@@ -330,31 +348,68 @@ class Vehicle:
         north = self.north_m if step.north_m is None else step.north_m
         de, dn = east - self.east_m, north - self.north_m
         distance = math.hypot(de, dn)
-        accel = self.accel_m_s2()
-        # Speed up to the cruise speed, and brake in time to stop on the point.
-        speed = min(
-            self.ground_speed_m_s + accel * dt_s,
-            step.speed_m_s or self.cruise_m_s(),
-            math.sqrt(2.0 * accel * distance),
-        )
-        reach = speed * dt_s
-        if distance <= reach:
-            ve, vn = de / dt_s, dn / dt_s
-            self.east_m, self.north_m = east, north
+        if step.profile is None and distance > 0.0:
+            step.profile = SCurve.for_leg(
+                distance,
+                step.speed_m_s or self.cruise_m_s(),
+                self.accel_m_s2(),
+                self.jerk_m_s3(),
+            )
+        if step.profile is None or distance == 0.0:
+            ve = vn = 0.0
             self.ground_speed_m_s = 0.0
         else:
-            ve, vn = de / distance * speed, dn / distance * speed
-            self.east_m += de / distance * reach
-            self.north_m += dn / distance * reach
-            self.ground_speed_m_s = speed
+            profile = step.profile
+            before = profile.speed_at(step.leg_s)
+            step.leg_s += dt_s
+            speed = profile.speed_at(step.leg_s)
+            step.along_m += 0.5 * (before + speed) * dt_s
+            left = profile.length_m - step.along_m
+            if step.leg_s >= profile.duration_s or left <= 0.0:
+                ve, vn = de / dt_s, dn / dt_s
+                self.east_m, self.north_m = east, north
+                self.ground_speed_m_s = 0.0
+                distance = 0.0
+            else:
+                # Along the line from here to the target, so the target is met exactly.
+                step_m = max(distance - left, 0.0)
+                ve, vn = de / distance * speed, dn / distance * speed
+                self.east_m += de / distance * step_m
+                self.north_m += dn / distance * step_m
+                self.ground_speed_m_s = speed
+                distance = left
         dz = step.alt_m - self.alt_m
-        rate = self.climb_m_s() if dz > 0 else self.descent_m_s(step.land)
-        if step.land and distance > reach:
-            dz, rate = 0.0, 0.0  # reach the landing point first, then descend
-        vz = math.copysign(min(abs(dz), rate * dt_s), dz) / dt_s if dz else 0.0
-        self.alt_m = max(self.alt_m + vz * dt_s, 0.0)
+        if step.land:
+            vz = self._descend(dt_s) if distance == 0.0 else 0.0  # over the point first
+        elif dz == 0.0:
+            vz = self.climb_rate_m_s = 0.0
+        else:
+            if step.climb is None:
+                rate = self.climb_m_s() if dz > 0 else self.descent_m_s(False)
+                step.climb = SCurve.for_leg(abs(dz), rate, self.climb_accel_m_s2(), math.inf)
+            before = step.climb.speed_at(step.climb_s)
+            step.climb_s += dt_s
+            now = step.climb.speed_at(step.climb_s)
+            step.climbed_m += 0.5 * (before + now) * dt_s
+            if step.climb_s >= step.climb.duration_s or step.climbed_m >= step.climb.length_m:
+                vz, self.alt_m = dz / dt_s, step.alt_m
+            else:
+                vz = math.copysign(now, dz)
+                self.alt_m = step.alt_m - math.copysign(step.climb.length_m - step.climbed_m, dz)
+            self.climb_rate_m_s = 0.0 if self.alt_m == step.alt_m else vz
         self.velocity = (ve, vn, vz)
-        return distance <= reach and abs(step.alt_m - self.alt_m) <= 1e-6
+        return distance == 0.0 and abs(step.alt_m - self.alt_m) <= 1e-6
+
+    def _descend(self, dt_s: float) -> float:
+        """A landing's descent: from rest down at WPNAV_SPEED_DN, then LAND_SPEED, reaching
+        the ground at that speed; the rate changes within WPNAV_ACCEL_Z. The vertical speed."""
+        change = self.climb_accel_m_s2() * dt_s
+        before = self.climb_rate_m_s
+        vz = max(-self.descent_m_s(True), before - change)
+        vz = min(vz, before + change)
+        self.alt_m = max(self.alt_m + 0.5 * (before + vz) * dt_s, 0.0)
+        self.climb_rate_m_s = 0.0 if self.alt_m == 0.0 else vz
+        return vz
 
     def mission_item_alt(self, frame: int, z: float) -> float:
         """An item's altitude as metres above home."""

@@ -28,6 +28,8 @@ DEFAULTS: dict[str, tuple[float, int]] = {
     "WPNAV_SPEED_UP": (250.0, REAL32),
     "WPNAV_SPEED_DN": (150.0, REAL32),
     "WPNAV_ACCEL": (250.0, REAL32),
+    "WPNAV_ACCEL_Z": (100.0, REAL32),
+    "WPNAV_JERK": (1.0, REAL32),
     "WPNAV_RADIUS": (200.0, REAL32),
     "LAND_SPEED": (50, INT16),
     "LAND_ALT_LOW": (1000, INT16),

@@ -17,7 +17,17 @@ mission uses, so a read-back here differs from the upload exactly where ArduPilo
   DO_DIGICAM_CONTROL keeps params 1-4 and x, y as bytes;
 * ``current`` always reads 0, ``autocontinue`` always 1.
 
-In PX4 mode items are stored and returned exactly as sent and there is no home item.
+In PX4 mode there is no home item, and items are kept as PX4 v1.16 SITL was seen to keep
+them:
+
+* a location command is accepted in frames 0/3/5/6 and comes back in 5 (GLOBAL_INT) or 6
+  (GLOBAL_RELATIVE_ALT_INT); the terrain frames 10/11 and any other frame are refused with
+  MAV_MISSION_UNSUPPORTED_FRAME, frame 2 (MISSION) with MAV_MISSION_UNSUPPORTED;
+* a command without a location is accepted only in frame 2 (else MAV_MISSION_UNSUPPORTED)
+  and kept verbatim;
+* NAV_TAKEOFF drops params 1-3, NAV_WAYPOINT param3, NAV_LAND params 1 and 3; their yaw
+  (param4) is kept as float32 radians wrapped to [0, 2 pi) and returned in degrees;
+* params and altitude travel as float32, ``autocontinue`` as sent.
 """
 
 from __future__ import annotations
@@ -191,6 +201,54 @@ def ardupilot_stored(item: Item) -> Item:
     return Item(item.command, frame, p1, p2, p3, p4, x, y, z, 1)
 
 
+# PX4's located frames and what each is returned as.
+_PX4_LOCATED_FRAME = {
+    mavlink.MAV_FRAME_GLOBAL: mavlink.MAV_FRAME_GLOBAL_INT,
+    mavlink.MAV_FRAME_GLOBAL_INT: mavlink.MAV_FRAME_GLOBAL_INT,
+    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+}
+
+
+def _px4_yaw(value: float) -> float:
+    """wrap_2pi(radians(yaw)) in float32, read back in degrees."""
+    if not math.isfinite(value):
+        return value
+    radians = np.float32(math.radians(value)) % np.float32(2.0 * math.pi)
+    return _f32(math.degrees(float(np.float32(radians))))
+
+
+_PX4_PARAM_STORAGE: dict[int, tuple[ParamStore, ParamStore, ParamStore, ParamStore]] = {
+    mavlink.MAV_CMD_NAV_TAKEOFF: (_zero, _zero, _zero, _px4_yaw),
+    mavlink.MAV_CMD_NAV_WAYPOINT: (_keep, _keep, _zero, _px4_yaw),
+    mavlink.MAV_CMD_NAV_LAND: (_zero, _keep, _zero, _px4_yaw),
+}
+
+
+def px4_check(item: Item) -> int:
+    """The MAV_MISSION_RESULT PX4 answers when this item is uploaded."""
+    if item.command in LOCATION_COMMANDS:
+        if item.frame == mavlink.MAV_FRAME_MISSION:
+            return int(mavlink.MAV_MISSION_UNSUPPORTED)
+        if item.frame not in _PX4_LOCATED_FRAME:
+            return int(mavlink.MAV_MISSION_UNSUPPORTED_FRAME)
+    elif item.frame != mavlink.MAV_FRAME_MISSION:
+        return int(mavlink.MAV_MISSION_UNSUPPORTED)
+    return int(mavlink.MAV_MISSION_ACCEPTED)
+
+
+def px4_stored(item: Item) -> Item:
+    """What PX4 returns on download for an item it accepted."""
+    if item.command not in LOCATION_COMMANDS:
+        return item  # already float32 from the wire
+    storage = _PX4_PARAM_STORAGE.get(item.command, (_keep, _keep, _keep, _keep))
+    p1, p2, p3, p4 = (store(value) for store, value in zip(storage, item.params, strict=True))
+    frame = _PX4_LOCATED_FRAME[item.frame]
+    return Item(
+        item.command, frame, p1, p2, p3, p4, item.x, item.y, _f32(item.z), item.autocontinue
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class Home:
     """The vehicle's home: degrees * 1e7 and metres above mean sea level."""
@@ -234,7 +292,7 @@ class MissionStore:
     def check(self, item: Item) -> int:
         """MAV_MISSION_RESULT for uploading ``item``."""
         if self.px4:
-            return int(mavlink.MAV_MISSION_ACCEPTED)
+            return px4_check(item)
         return ardupilot_check(item)
 
     def truncate(self, count: int) -> None:
@@ -250,7 +308,9 @@ class MissionStore:
 
     def write(self, seq: int, item: Item) -> None:
         """Store an accepted item at ``seq`` (replace or append); ArduPilot ignores seq 0."""
-        if not self.px4:
+        if self.px4:
+            item = px4_stored(item)
+        else:
             if seq == 0:
                 return
             item = ardupilot_stored(item)

@@ -14,6 +14,8 @@ from urpt_gcs.solvers._ls_kernels import (
     EPS,
     best_insertion,
     cycle_cost,
+    dist,
+    dtr,
     insert_at,
     local_search,
     push_around,
@@ -41,7 +43,7 @@ def insert_clusters(P, t, n, pos, rem, k, mode, noise, rng):  # type: ignore[no-
     was the removed edge. ``mode`` orders the insertions: 0 random, 1 cheapest first,
     2 costliest first; ``noise`` scales a multiplicative random factor on that choice.
     """
-    d, dt, start, cl, _, _, _ = P
+    _, _, _, start, cl, _, _, _ = P
     cost = np.zeros(k)
     node = np.empty(k, np.int32)
     pred = np.full(k, -1, np.int32)  # the node to insert after; -1: to be recomputed
@@ -91,10 +93,10 @@ def insert_clusters(P, t, n, pos, rem, k, mode, noise, rng):  # type: ignore[no-
                 continue
             c = rem[r]
             for w in range(start[c], start[c + 1]):
-                c1 = d[a, w] + dt[v, w] - d[a, v]
+                c1 = dist(P, a, w) + dtr(P, v, w) - dist(P, a, v)
                 if c1 < cost[r]:
                     cost[r], node[r], pred[r] = c1, w, a
-                c2 = d[v, w] + dt[b, w] - d[v, b]
+                c2 = dist(P, v, w) + dtr(P, b, w) - dist(P, v, b)
                 if c2 < cost[r]:
                     cost[r], node[r], pred[r] = c2, w, v
     return n
@@ -108,7 +110,7 @@ def remove_clusters(P, t, m, pos, k, method, power, rem, rng):  # type: ignore[n
     nearest to a random one, 3 a random segment. 1 and 2 draw from the ranked list with a
     bias ``power`` to its front (1: uniform; larger: greedier).
     """
-    d, _, _, cl, _, setd, _ = P
+    _, _, _, _, cl, _, setd, _ = P
     mark = np.zeros(m, np.bool_)
     if method == 3:
         s = rng.integers(0, m)
@@ -121,11 +123,13 @@ def remove_clusters(P, t, m, pos, k, method, power, rem, rng):  # type: ignore[n
                 p = t[i - 1] if i > 0 else t[m - 1]
                 x = t[i]
                 nx = t[i + 1] if i + 1 < m else t[0]
-                key[i] = d[p, nx] - d[p, x] - d[x, nx]
+                key[i] = dist(P, p, nx) - dist(P, p, x) - dist(P, x, nx)
         elif method == 2:
-            c = cl[t[rng.integers(0, m)]]
+            a = t[rng.integers(0, m)]
+            c = cl[a]
             for i in range(m):
-                key[i] = setd[c, cl[t[i]]]
+                # On the plane the clusters are related by their nodes' distance instead.
+                key[i] = setd[c, cl[t[i]]] if setd.shape[0] > 0 else dist(P, a, t[i])
         else:
             for i in range(m):
                 key[i] = rng.random()
@@ -163,12 +167,23 @@ def _roulette(weights, lo, hi, rng):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def rebuild(P, t, m, moves, W, Q, rng):  # type: ignore[no-untyped-def]
     """A fresh tour: every cluster inserted in random order, then local search; its cost."""
-    cl = P[3]
+    cl = P[4]
     pos, rem = W[0], W[1]
     for c in range(m):
         rem[c] = c
     pos[:] = -1
     insert_clusters(P, t, 0, pos, rem, m, 0, 0.0, rng)
+    for c in range(m):
+        push_around(Q, t, cl, m, pos[c])
+    return local_search(P, t, m, moves, W, Q)
+
+
+@njit(cache=True)
+def improve(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
+    """Local search on the whole of the tour ``t[:m]``; its cost."""
+    cl = P[4]
+    pos = W[0]
+    set_positions(t, pos, cl, m)
     for c in range(m):
         push_around(Q, t, cl, m, pos[c])
     return local_search(P, t, m, moves, W, Q)
@@ -185,7 +200,7 @@ def lns_chunk(P, tours, sf, si, pf, pi, weights, W, Q, rng, n_iter):  # type: ig
     from the trial best, up to ``pi[Q_RESTARTS]`` times, then the trial ends. Removal and
     insertion heuristics are drawn with probabilities proportional to ``weights``.
     """
-    cl = P[3]
+    cl = P[4]
     cur, best, trial = tours
     pos, rem = W[0], W[1]
     m = cur.shape[0]
@@ -231,10 +246,10 @@ def recombine(P, best, elite, n_children, moves, W, Q, rng, child):  # type: ign
     clusters in the order and with the nodes of ``best``, then improved by local search
     everywhere. Returns the cost of ``best`` afterwards.
     """
-    d, cl = P[0], P[3]
+    cl = P[4]
     pos = W[0]
     m = best.shape[0]
-    best_cost = cycle_cost(d, best, m)
+    best_cost = cycle_cost(P, best, m)
     taken = np.zeros(m, np.bool_)
     for _ in range(n_children):
         b = elite[rng.integers(0, elite.shape[0])]

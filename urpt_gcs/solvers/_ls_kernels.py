@@ -2,12 +2,15 @@
 
 Conventions shared with :mod:`._lns_kernels`:
 
-- ``P = (d, dt, start, cl, nbr, setd, kn)`` describes the instance. Nodes are renumbered so that
-  the nodes of cluster ``c`` are ``start[c]:start[c + 1]``; ``cl[v]`` is the cluster of node
-  ``v``; ``d[u, v]`` is the cost of ``u -> v`` (asymmetric allowed) and ``dt`` its transpose,
-  C-contiguous, so that reading a column is reading a row; ``nbr[c]`` lists the other clusters
-  nearest first by ``setd``, the cluster-to-cluster distance, and moves look at the first
-  ``kn`` of them.
+- ``P = (d, dt, xy, start, cl, nbr, setd, kn)`` describes the instance. Nodes are renumbered
+  so that the nodes of cluster ``c`` are ``start[c]:start[c + 1]``; ``cl[v]`` is the cluster
+  of node ``v``. Distances come in one of two forms: explicit, ``d[u, v]`` is the cost of
+  ``u -> v`` (asymmetric allowed) and ``dt`` its transpose, C-contiguous, so that reading a
+  column is reading a row, and ``xy`` is empty; or on the plane, ``xy[v]`` is node ``v``'s
+  position, the cost is Euclidean, computed where needed, and ``d``, ``dt`` are empty, so that
+  memory stays linear in the nodes. ``nbr[c]`` lists other clusters nearest first (all of
+  them, ranked by ``setd``, the cluster-to-cluster distance, when explicit; the nearest few
+  by a spatial index, ``setd`` empty, on the plane), and moves look at the first ``kn``.
 - A tour is an int32 array ``t`` of nodes, one per cluster, read cyclically; a partial tour is
   its first ``n`` entries. ``pos[c]`` is the index of cluster ``c`` in ``t`` (-1: absent).
 - ``Q = (stack, queued, top)`` is the set of clusters the local search still has to look at
@@ -28,12 +31,35 @@ SYMMETRIC, TWO_OPT, OR_OPT = 1, 2, 4
 
 
 @njit(cache=True)
-def cycle_cost(d, t, n):  # type: ignore[no-untyped-def]
+def dist(P, u, v):  # type: ignore[no-untyped-def]
+    """The cost of ``u -> v``: from the matrix, or Euclidean between the node positions."""
+    xy = P[2]
+    if xy.shape[0] == 0:
+        return P[0][u, v]
+    dx = xy[u, 0] - xy[v, 0]
+    dy = xy[u, 1] - xy[v, 1]
+    return np.sqrt(dx * dx + dy * dy)
+
+
+@njit(cache=True)
+def dtr(P, u, v):  # type: ignore[no-untyped-def]
+    """The cost of ``v -> u``, read from the transposed matrix so that a loop over ``v``
+    reads a row."""
+    xy = P[2]
+    if xy.shape[0] == 0:
+        return P[1][u, v]
+    dx = xy[u, 0] - xy[v, 0]
+    dy = xy[u, 1] - xy[v, 1]
+    return np.sqrt(dx * dx + dy * dy)
+
+
+@njit(cache=True)
+def cycle_cost(P, t, n):  # type: ignore[no-untyped-def]
     if n < 2:
-        return d[t[0], t[0]] if n == 1 else 0.0
-    total = d[t[n - 1], t[0]]
+        return dist(P, t[0], t[0]) if n == 1 else 0.0
+    total = dist(P, t[n - 1], t[0])
     for i in range(n - 1):
-        total += d[t[i], t[i + 1]]
+        total += dist(P, t[i], t[i + 1])
     return total
 
 
@@ -90,7 +116,7 @@ def best_insertion(P, t, n, pos, c):  # type: ignore[no-untyped-def]
     On a long tour only the edges next to the ``kn`` clusters of the tour nearest to ``c`` are
     tried; on a short one, every edge.
     """
-    d, dt, start, _, nbr, _, kn = P
+    _, _, _, start, _, nbr, _, kn = P
     v0, v1 = start[c], start[c + 1]
     if n == 0:
         return 0.0, v0, 0
@@ -107,9 +133,9 @@ def best_insertion(P, t, n, pos, c):  # type: ignore[no-untyped-def]
                 e = j if side else (j - 1 if j > 0 else n - 1)
                 a = t[e]
                 b = t[e + 1] if e + 1 < n else t[0]
-                base = d[a, b]
+                base = dist(P, a, b)
                 for v in range(v0, v1):
-                    cost = d[a, v] + dt[b, v] - base
+                    cost = dist(P, a, v) + dtr(P, b, v) - base
                     if cost < best:
                         best, best_v, best_i = cost, v, e + 1
             if found == kn:
@@ -119,9 +145,9 @@ def best_insertion(P, t, n, pos, c):  # type: ignore[no-untyped-def]
         for e in range(n):
             a = t[e]
             b = t[e + 1] if e + 1 < n else t[0]
-            base = d[a, b] if n > 1 else 0.0
+            base = dist(P, a, b) if n > 1 else 0.0
             for v in range(v0, v1):
-                cost = d[a, v] + dt[b, v] - base
+                cost = dist(P, a, v) + dtr(P, b, v) - base
                 if cost < best:
                     best, best_v, best_i = cost, v, e + 1
     return best, best_v, best_i
@@ -135,16 +161,16 @@ def reopt_nodes(P, t, m, pos, best_cost, Q):  # type: ignore[no-untyped-def]
     smallest cluster, which closes the cycle. Clusters whose node changed are queued in ``Q``.
     Returns the cost of ``t`` afterwards.
     """
-    d, dt, start, cl, _, _, _ = P
+    _, _, _, start, cl, _, _, _ = P
     if m < 2:
-        return cycle_cost(d, t, m)
+        return cycle_cost(P, t, m)
     s = 0
     for i in range(1, m):
         c, cs = cl[t[i]], cl[t[s]]
         if start[c + 1] - start[c] < start[cs + 1] - start[cs]:
             s = i
-    dist = np.empty(d.shape[0])
-    back = np.empty(d.shape[0], np.int32)
+    lab = np.empty(start[-1])
+    back = np.empty(start[-1], np.int32)
     out = np.empty(m, np.int32)
     improved = False
     c0 = cl[t[s]]
@@ -154,17 +180,17 @@ def reopt_nodes(P, t, m, pos, best_cost, Q):  # type: ignore[no-untyped-def]
             c = cl[t[(s + step) % m]]
             for v in range(start[c], start[c + 1]):
                 if step == 1:
-                    dist[v], back[v] = d[u, v], u
+                    lab[v], back[v] = dist(P, u, v), u
                     continue
                 bd, bw = np.inf, -1
                 for w in range(start[prev], start[prev + 1]):
-                    x = dist[w] + dt[v, w]
+                    x = lab[w] + dtr(P, v, w)
                     if x < bd:
                         bd, bw = x, w
-                dist[v], back[v] = bd, bw
+                lab[v], back[v] = bd, bw
             prev = c
         for w in range(start[prev], start[prev + 1]):
-            total = dist[w] + d[w, u]
+            total = lab[w] + dist(P, w, u)
             if total < best_cost - EPS:
                 best_cost = total
                 improved = True
@@ -189,18 +215,18 @@ def _try_move(P, t, m, pos, c, Q):  # type: ignore[no-untyped-def]
     The edges next to its nearest clusters (or all, on a short tour) are tried, and the edge
     its neighbours would form without it, where only its node can change.
     """
-    d, dt, start, cl, nbr, _, kn = P
+    _, _, _, start, cl, nbr, _, kn = P
     v0, v1 = start[c], start[c + 1]
     i = pos[c]
     x = t[i]
     ip = i - 1 if i > 0 else m - 1
     p = t[ip]
     nx = t[i + 1 if i + 1 < m else 0]
-    base = d[p, nx]
-    gain = d[p, x] + d[x, nx] - base
+    base = dist(P, p, nx)
+    gain = dist(P, p, x) + dist(P, x, nx) - base
     best, best_v, best_e = gain - EPS, -1, -1
     for v in range(v0, v1):
-        cost = d[p, v] + dt[nx, v] - base
+        cost = dist(P, p, v) + dtr(P, nx, v) - base
         if cost < best:
             best, best_v = cost, v
     full = m <= 2 * kn + 2
@@ -215,9 +241,9 @@ def _try_move(P, t, m, pos, c, Q):  # type: ignore[no-untyped-def]
             continue
         a = t[e]
         b = t[e + 1 if e + 1 < m else 0]
-        base = d[a, b]
+        base = dist(P, a, b)
         for v in range(v0, v1):
-            cost = d[a, v] + dt[b, v] - base
+            cost = dist(P, a, v) + dtr(P, b, v) - base
             if cost < best:
                 best, best_v, best_e = cost, v, e
     if best_v < 0:
@@ -242,13 +268,13 @@ def _try_two_opt(P, t, m, pos, c, sym, fw, bw, Q):  # type: ignore[no-untyped-de
     Removing the edges after indices ``lo < hi`` and reversing ``t[lo + 1 : hi + 1]``; for an
     asymmetric instance the reversed part is costed in reverse via prefix sums.
     """
-    d, _, _, cl, nbr, _, kn = P
+    _, _, _, _, cl, nbr, _, kn = P
     if not sym:
         fw[0] = 0.0
         bw[0] = 0.0
         for q in range(m - 1):
-            fw[q + 1] = fw[q] + d[t[q], t[q + 1]]
-            bw[q + 1] = bw[q] + d[t[q + 1], t[q]]
+            fw[q + 1] = fw[q] + dist(P, t[q], t[q + 1])
+            bw[q + 1] = bw[q] + dist(P, t[q + 1], t[q])
     i = pos[c]
     for q in nbr[c, :kn]:
         j = pos[q]
@@ -260,7 +286,7 @@ def _try_two_opt(P, t, m, pos, c, sym, fw, bw, Q):  # type: ignore[no-untyped-de
                 continue
             a, b, x = t[lo], t[lo + 1], t[hi]
             e = t[hi + 1] if hi + 1 < m else t[0]
-            delta = d[a, x] + d[b, e] - d[a, b] - d[x, e]
+            delta = dist(P, a, x) + dist(P, b, e) - dist(P, a, b) - dist(P, x, e)
             if not sym:
                 delta += (bw[hi] - bw[lo + 1]) - (fw[hi] - fw[lo + 1])
             if delta < -EPS:
@@ -280,7 +306,7 @@ def _try_two_opt(P, t, m, pos, c, sym, fw, bw, Q):  # type: ignore[no-untyped-de
 @njit(cache=True)
 def _try_or_opt(P, t, m, pos, c, buf, Q):  # type: ignore[no-untyped-def]
     """Move the 2 or 3 clusters starting at ``c`` next to a cluster near its ends, either way."""
-    d, _, _, cl, nbr, _, kn = P
+    _, _, _, _, cl, nbr, _, kn = P
     s = pos[c]
     for length in range(2, 4):
         if m < length + 3:
@@ -293,9 +319,9 @@ def _try_or_opt(P, t, m, pos, c, buf, Q):  # type: ignore[no-untyped-def]
         rev = 0.0
         for q in range(length - 1):
             x, y = t[_wrap(s + q, m)], t[_wrap(s + q + 1, m)]
-            fwd += d[x, y]
-            rev += d[y, x]
-        gain = d[p, first] + d[last, nx] - d[p, nx]
+            fwd += dist(P, x, y)
+            rev += dist(P, y, x)
+        gain = dist(P, p, first) + dist(P, last, nx) - dist(P, p, nx)
         best, best_off, best_rev = -EPS, -1, False
         for end in (first, last):
             for q in nbr[cl[end], :kn]:
@@ -307,11 +333,11 @@ def _try_or_opt(P, t, m, pos, c, buf, Q):  # type: ignore[no-untyped-def]
                         continue
                     a = t[_wrap(s + off, m)]
                     b = t[_wrap(s + off + 1, m)]
-                    base = d[a, b] + gain
-                    x = d[a, first] + d[last, b] - base
+                    base = dist(P, a, b) + gain
+                    x = dist(P, a, first) + dist(P, last, b) - base
                     if x < best:
                         best, best_off, best_rev = x, off, False
-                    y = d[a, last] + d[first, b] - base + rev - fwd
+                    y = dist(P, a, last) + dist(P, first, b) - base + rev - fwd
                     if y < best:
                         best, best_off, best_rev = y, off, True
         if best_off < 0:
@@ -346,7 +372,6 @@ def local_search(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
     queue is empty the node choice for the order is made exact, which may queue more.
     Returns the cost of the tour.
     """
-    d = P[0]
     pos, _, fw, bw, buf = W
     stack, queued, top = Q
     while True:
@@ -363,7 +388,7 @@ def local_search(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
                 continue
             if moves & OR_OPT:
                 _try_or_opt(P, t, m, pos, c, buf, Q)
-        cost = cycle_cost(d, t, m)
+        cost = cycle_cost(P, t, m)
         new = reopt_nodes(P, t, m, pos, cost, Q)
         if top[0] == 0 or new >= cost - EPS:
             return new

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.gtsp import Geometry, Instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import (
     DISC_PACKING_ALPHA,
     SolveSettings,
@@ -94,10 +94,10 @@ def _centre_tour(
         d = np.hypot(centres[:, 0] - instance.depot_xy[0], centres[:, 1] - instance.depot_xy[1])
         depot_distance = np.vstack([d, d])
     tsp = Instance(
-        covers=np.eye(k, dtype=bool),
-        distance=euclidean_matrix(centres),
+        covers=Covers.identity(k),
         depot_distance=depot_distance,
         points_xy=centres,
+        depot_xy=instance.depot_xy,
     )
     now = time.perf_counter()
     order = quick_tour(tsp, now + _SEED_SHARE * max(deadline - now, 0.0), seed)

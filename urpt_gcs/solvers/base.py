@@ -154,7 +154,7 @@ def finish_tour(
         solver=solver,
         solve_s=solve_s,
         points_xy=None if instance.points_xy is None else instance.points_xy[idx],
-        sees=instance.covers[idx],
+        sees=instance.covers.dense(idx),
         notes=notes,
     )
 

@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.gtsp import Instance, euclidean_matrix
+from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 from urpt_gcs.inputs import require_memory
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.clustered import cluster_instance, partition_nodes, viewpoint_order
@@ -90,7 +90,7 @@ class ExactResult:
 
 def _masks(instance: Instance) -> I64:
     weights = np.left_shift(np.int64(1), np.arange(instance.n_targets, dtype=np.int64))
-    masks: I64 = (instance.covers.astype(np.int64) * weights).sum(axis=1)
+    masks: I64 = (instance.covers.dense().astype(np.int64) * weights).sum(axis=1)
     return masks
 
 
@@ -98,9 +98,8 @@ def _starts(instance: Instance) -> I64:
     """Viewpoints the DP starts from: none (depot) or those of the rarest target."""
     if instance.has_depot:
         return np.zeros(0, dtype=np.int64)
-    counts = instance.covers.sum(axis=0)
-    rarest = int(np.argmin(counts))
-    return np.flatnonzero(instance.covers[:, rarest]).astype(np.int64)
+    rarest = int(np.argmin(instance.covers.per_target()))
+    return instance.covers.viewpoints_of(rarest)
 
 
 def exact_work(instance: Instance) -> ExactWork:
@@ -108,7 +107,7 @@ def exact_work(instance: Instance) -> ExactWork:
     m, n = instance.n_targets, instance.n_viewpoints
     if m > MAX_TARGETS:
         return ExactWork(math.inf, math.inf, 0)
-    sizes = instance.covers.sum(axis=1)
+    sizes = instance.covers.per_viewpoint()
     per_start = float(n) * float(np.sum(np.exp2(m - sizes)))
     starts = max(len(_starts(instance)), 1)
     return ExactWork(per_start * starts, float(2**m) * n * 16.0, starts)
@@ -292,11 +291,12 @@ def _finish_bounds(instance: Instance, paths: F64, close: F64) -> F64:
     """``b[v, t] = min over w seeing t of path(v, w) + close(w)``: a lower bound on the rest of
     the tour from ``v`` while ``t`` is unseen, with ``paths`` shortest-path distances and
     ``close`` the shortest cost of ending the tour from each viewpoint."""
-    n, m = instance.covers.shape
+    n, m = instance.n_viewpoints, instance.n_targets
+    covers = instance.covers.dense()
     out = np.empty((n, m), dtype=np.float64)
     via = paths + close[None, :]
     for t in range(m):
-        out[:, t] = via[:, instance.covers[:, t]].min(axis=1)
+        out[:, t] = via[:, covers[:, t]].min(axis=1)
     return out
 
 
@@ -314,10 +314,10 @@ def greedy_order(instance: Instance) -> list[int]:
     list of int
         Viewpoints in flight order (after the depot, if there is one).
     """
-    covers = instance.covers
+    covers = instance.covers.dense()
     unseen = np.ones(instance.n_targets, dtype=bool)
     order: list[int] = []
-    dist = instance.distance
+    dist = instance.matrix()
     while unseen.any():
         gain = covers[:, unseen].sum(axis=1).astype(np.float64)
         if not order:
@@ -435,12 +435,13 @@ def search_exact(
 
     # Bounds must hold even where distances break the triangle inequality (GTSPLIB rounding),
     # so they are built on shortest paths.
-    paths = _shortest_paths(instance.distance, budget)
+    matrix = instance.matrix()
+    paths = _shortest_paths(matrix, budget)
     if paths is None:
         return stopped(0.0)
     cover = _masks(instance)
     full = (1 << m) - 1
-    dist = np.array(instance.distance, dtype=np.float64, order="C")  # a copy: never mutate
+    dist = np.array(matrix, dtype=np.float64, order="C")  # a copy: never mutate
     np.fill_diagonal(dist, np.inf)
     cost = np.empty((full + 1, n), dtype=np.float64)
     parent_mask = np.empty((full + 1, n), dtype=np.int32)
@@ -457,7 +458,7 @@ def search_exact(
         for s in _starts(instance).tolist():
             first = np.full(n, np.inf)
             first[s] = 0.0
-            starts.append((first, instance.distance[:, s].copy(), paths[:, s].copy()))
+            starts.append((first, matrix[:, s].copy(), paths[:, s].copy()))
     for k, (first, last, close) in enumerate(starts):
         for row in range(0, full + 1, _RESET_ROWS):
             if time.perf_counter() >= deadline:
@@ -513,7 +514,7 @@ def _unstarted_bound(instance: Instance, paths: F64, starts: list[tuple[F64, F64
         reachable = np.isfinite(first)
         # From the depot the first move is itself a leg; from a start viewpoint it is free.
         via = (first[reachable, None] + paths[reachable] + close[None, :]).min(axis=0)
-        need = np.where(instance.covers, via[:, None], np.inf).min(axis=0)
+        need = np.where(instance.covers.dense(), via[:, None], np.inf).min(axis=0)
         out = min(out, float(need.max()) if need.size else 0.0)
     return out
 
@@ -532,7 +533,7 @@ def solve_exact(
 def warm_up() -> None:
     """Compile the DP kernels, or load them from numba's cache, on a tiny instance."""
     points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-    tiny = Instance(covers=np.eye(3, dtype=bool), distance=euclidean_matrix(points))
+    tiny = Instance(covers=Covers.identity(3), distance=euclidean_matrix(points))
     seed = quick_tour(tiny, time.perf_counter() + 60.0)
     search_exact(tiny, seed)
     # A stop at once, so the bound's kernel is compiled too.

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance
@@ -53,9 +54,22 @@ F64 = npt.NDArray[np.float64]
 _CHUNK_S = 0.02
 # Crossings per compiled call, between two looks at the clock.
 _CHILDREN_PER_CALL = 25
-# Peak memory per pair of partition-form nodes: the partition form's matrix, its renumbered
-# copy and transpose, and the temporaries that rank the clusters (33 measured).
+# Peak memory per pair of partition-form nodes of an explicit instance: the partition form's
+# matrix, its renumbered copy and transpose, and the temporaries that rank the clusters (33
+# measured).
 _BYTES_PER_NODE_PAIR = 36.0
+# Peak memory per node on the plane: the partition form (position, cluster, viewpoint), its
+# renumbered copy, the k-d tree, the cycle programme's labels, and per cluster its neighbour
+# list and scratch space, counted per node (a cluster has at least one).
+_BYTES_PER_NODE = 320.0
+# Nearest clusters kept per cluster on the plane; moves look at the first `neighbours`.
+_PLANE_NEIGHBOURS = 16
+# Nodes per k-d tree query, which bounds its temporaries.
+_QUERY_NODES = 1 << 16
+# From this many clusters on, a fresh tour follows a Hilbert curve over the cluster centres
+# (then the cycle programme picks the nodes) instead of random cheapest insertion, whose
+# cost grows with the square of the clusters and which the clock cannot interrupt.
+_CURVE_CLUSTERS = 1000
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,10 +143,16 @@ class SearchSettings:
 
 @dataclass(frozen=True, slots=True)
 class _Problem:
-    """The partition form renumbered so that each cluster's nodes are contiguous."""
+    """The partition form renumbered so that each cluster's nodes are contiguous.
+
+    Explicit: ``d``, ``dt`` node matrices, ``setd`` the cluster matrix, ``nbr`` every other
+    cluster ranked; ``xy`` empty. On the plane: ``xy`` node positions, ``nbr`` the nearest
+    few clusters, ``d``, ``dt``, ``setd`` empty, so that every array is linear in the nodes.
+    """
 
     d: F64
     dt: F64
+    xy: F64
     start: I32
     cl: I32
     nbr: I32
@@ -146,16 +166,102 @@ class _Problem:
         return int(self.start.shape[0] - 1)
 
     @property
-    def kernel_args(self) -> tuple[F64, F64, I32, I32, I32, F64, int]:
-        return (self.d, self.dt, self.start, self.cl, self.nbr, self.setd, self.neighbours)
+    def on_plane(self) -> bool:
+        return int(self.xy.shape[0]) > 0
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the arrays the search keeps."""
+        arrays = (self.d, self.dt, self.xy, self.start, self.cl, self.nbr, self.setd)
+        return sum(int(a.nbytes) for a in arrays) + int(self.node_of.nbytes)
+
+    @property
+    def kernel_args(self) -> tuple[F64, F64, F64, I32, I32, I32, F64, int]:
+        return (
+            self.d,
+            self.dt,
+            self.xy,
+            self.start,
+            self.cl,
+            self.nbr,
+            self.setd,
+            self.neighbours,
+        )
+
+
+def _nearest_clusters(xy: F64, cl: I32, m: int, k: int) -> I32:
+    """The ``k`` clusters nearest to each cluster, nearest first, by a k-d tree over the nodes.
+
+    Clusters are ranked by the closest pair of their nodes among each node's nearest nodes;
+    each cluster's nearest centroids come after those, so that a cluster crowded by its own
+    nodes still gets ``k`` neighbours.
+    """
+    n = len(xy)
+    per_node = min(n, k + 4)
+    tree = cKDTree(xy)
+    keys: list[npt.NDArray[np.int64]] = []
+    gaps: list[F64] = []
+    for lo in range(0, n, _QUERY_NODES):
+        gap, idx = tree.query(xy[lo : lo + _QUERY_NODES], k=per_node)
+        a = np.repeat(cl[lo : lo + _QUERY_NODES].astype(np.int64), per_node)
+        key = a * m + cl[idx.ravel()]
+        # Keep one (cluster, cluster) pair per block, its closest: blocks are whole clusters.
+        order = np.lexsort((gap.ravel(), key))
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = key[order][1:] != key[order][:-1]
+        keys.append(key[order][first])
+        gaps.append(gap.ravel()[order][first])
+    counts = np.bincount(cl, minlength=m).astype(np.float64)
+    centre = np.column_stack(
+        [np.bincount(cl, weights=xy[:, i], minlength=m) / counts for i in range(2)]
+    )
+    gap, idx = cKDTree(centre).query(centre, k=min(m, k + 1))
+    keys.append(np.repeat(np.arange(m, dtype=np.int64), idx.shape[1]) * m + idx.ravel())
+    gaps.append(gap.ravel())
+    key = np.concatenate(keys)
+    # Pairs found among the nodes first, by their gap; then the centroid pairs.
+    tier = np.zeros(key.size, dtype=np.int8)
+    tier[key.size - keys[-1].size :] = 1
+    order = np.lexsort((np.concatenate(gaps), tier, key // m))
+    key = key[order]
+    a, b = key // m, key % m
+    keep = a != b
+    a, b = a[keep], b[keep]
+    # First occurrence of each pair, then the first k per cluster.
+    pair = a * m + b
+    _, first = np.unique(pair, return_index=True)
+    first.sort()
+    a, b = a[first], b[first]
+    rank = np.arange(a.size) - np.searchsorted(a, a)
+    nbr = np.empty((m, k), dtype=np.int32)
+    nbr[a[rank < k], rank[rank < k]] = b[rank < k]
+    return nbr
 
 
 def _prepare(clustered: Clustered, neighbours: int) -> _Problem:
     perm = np.argsort(clustered.cluster, kind="stable")
-    d = np.ascontiguousarray(clustered.distance[np.ix_(perm, perm)], dtype=np.float64)
     cl = clustered.cluster[perm].astype(np.int32)
     m = clustered.n_clusters
     start = np.concatenate([[0], np.cumsum(np.bincount(cl, minlength=m))]).astype(np.int32)
+    empty = np.zeros((0, 0), dtype=np.float64)
+    if clustered.xy is not None:
+        xy = np.ascontiguousarray(clustered.xy[perm], dtype=np.float64)
+        k = max(1, min(max(neighbours, _PLANE_NEIGHBOURS), m - 1))
+        nbr = _nearest_clusters(xy, cl, m, k) if m > 1 else np.zeros((m, 1), np.int32)
+        return _Problem(
+            d=empty,
+            dt=empty,
+            xy=xy,
+            start=start,
+            cl=cl,
+            nbr=nbr,
+            setd=empty,
+            neighbours=max(1, min(neighbours, k)),
+            sym=True,
+            node_of=perm,
+        )
+    assert clustered.distance is not None
+    d = np.ascontiguousarray(clustered.distance[np.ix_(perm, perm)], dtype=np.float64)
     # Clusters are ranked by their closest pair of nodes, either way round.
     both = np.minimum(d, d.T)
     setd = np.minimum.reduceat(np.minimum.reduceat(both, start[:-1], axis=0), start[:-1], axis=1)
@@ -163,6 +269,7 @@ def _prepare(clustered: Clustered, neighbours: int) -> _Problem:
     return _Problem(
         d=d,
         dt=np.ascontiguousarray(d.T),
+        xy=np.zeros((0, 2), dtype=np.float64),
         start=start,
         cl=cl,
         nbr=np.ascontiguousarray(ranked[:, : m - 1], dtype=np.int32),
@@ -173,16 +280,43 @@ def _prepare(clustered: Clustered, neighbours: int) -> _Problem:
     )
 
 
+def _hilbert_order(xy: F64, bits: int = 16) -> npt.NDArray[np.int64]:
+    """Indices of ``xy`` along a Hilbert curve over their bounding square."""
+    lo = xy.min(axis=0)
+    span = max(float(np.ptp(xy, axis=0).max()), 1e-12)
+    side = 1 << bits
+    q = np.minimum(((xy - lo) / span * side).astype(np.int64), side - 1)
+    x, y = q[:, 0].copy(), q[:, 1].copy()
+    key = np.zeros(len(xy), dtype=np.int64)
+    s = side >> 1
+    while s > 0:
+        rx = (x & s) > 0
+        ry = (y & s) > 0
+        key += s * s * ((3 * rx.astype(np.int64)) ^ ry.astype(np.int64))
+        flip = ~ry & rx
+        x = np.where(flip, side - 1 - x, x)
+        y = np.where(flip, side - 1 - y, y)
+        x, y = np.where(~ry, y, x), np.where(~ry, x, y)
+        s >>= 1
+    return np.argsort(key, kind="stable")
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile the kernels, or load them from numba's cache, by solving a tiny instance."""
     xy = np.random.default_rng(0).random((12, 2))
     d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
     clustered = Clustered(d, np.arange(12) % 6, 6, np.arange(12), None)
-    # Two trials, so that the crossing is compiled too.
+    # Two trials, so that the crossing is compiled too; the kernels' argument types are the
+    # same on the plane, so one compilation serves both forms.
     search = SearchSettings(trials=2, neighbours=2)
     deadline = time.perf_counter() + 60.0
     _search(_prepare(clustered, search.neighbours), SolveSettings(), search, deadline)
+    plane = Clustered(None, np.arange(12) % 6, 6, np.arange(12), None, xy=xy)
+    p = _prepare(plane, search.neighbours)
+    _search(p, SolveSettings(), search, deadline)
+    run = _Run(p, SolveSettings(), search, deadline)
+    run.curve_tour()
 
 
 class _Run:
@@ -220,8 +354,22 @@ class _Run:
         return time.perf_counter() >= self.deadline
 
     def fresh_tour(self) -> tuple[I32, float]:
+        if self.p.on_plane and self.m >= _CURVE_CLUSTERS:
+            return self.curve_tour()
         tour = np.zeros(self.m, dtype=np.int32)
         cost = lns.rebuild(self.P, tour, self.m, self.moves, self.W, self.Q, self.rng)
+        return tour, float(cost)
+
+    def curve_tour(self) -> tuple[I32, float]:
+        """Clusters in Hilbert order of their centres, improved by local search (whose
+        closing cycle programme makes the node choice exact for the order)."""
+        p = self.p
+        counts = np.diff(p.start).astype(np.float64)
+        centre = np.column_stack(
+            [np.add.reduceat(p.xy[:, i], p.start[:-1]) / counts for i in range(2)]
+        )
+        tour = p.start[:-1][_hilbert_order(centre)].astype(np.int32)
+        cost = lns.improve(self.P, tour, self.m, self.moves, self.W, self.Q)
         return tour, float(cost)
 
     def anneal(self, tour: I32, cost: float, temp: float, restarts: int) -> tuple[I32, float]:
@@ -344,7 +492,10 @@ class HeuristicSolver:
         Tour
             A tour that sees every target, with the instance's geometric lower bound.
         """
-        require_partition_memory(instance, self.name, _BYTES_PER_NODE_PAIR)
+        if instance.explicit:
+            require_partition_memory(instance, self.name, _BYTES_PER_NODE_PAIR)
+        else:
+            require_partition_memory(instance, self.name, 0.0, _BYTES_PER_NODE)
         warm_up()
         started = time.perf_counter()
         clustered = cluster_instance(instance)

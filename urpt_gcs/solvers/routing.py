@@ -15,12 +15,13 @@ import time
 import numpy as np
 from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 
-from urpt_gcs.errors import PlanError
+from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.gtsp import Instance
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.clustered import (
     Clustered,
     cluster_instance,
+    partition_nodes,
     require_partition_memory,
     viewpoint_order,
 )
@@ -30,6 +31,9 @@ _SCALE = 100.0
 # Peak memory per pair of partition-form nodes: the float and integer matrices, the Python
 # lists handed to routing and its own copy (63 measured).
 _BYTES_PER_NODE_PAIR = 72.0
+# Routing's arc costs are a full matrix in C++ (a callback per arc over coordinates would be
+# called from Python millions of times), so the baseline stops at this many nodes.
+MAX_NODES = 12_000
 
 
 def route_clustered(
@@ -43,7 +47,7 @@ def route_clustered(
     if deadline is None:
         deadline = time.perf_counter() + time_limit_s
     n = clustered.n_nodes
-    cost = np.rint(clustered.distance * _SCALE).astype(np.int64)
+    cost = np.rint(clustered.matrix() * _SCALE).astype(np.int64)
     manager = pywrapcp.RoutingIndexManager(n, 1, start)
     routing = pywrapcp.RoutingModel(manager)
     # A matrix callback stays in C++; a Python callback would be called millions of times.
@@ -115,6 +119,12 @@ class RoutingSolver:
     name = "ortools"
 
     def solve(self, instance: Instance, settings: SolveSettings) -> Tour:
+        n = partition_nodes(instance)
+        if n > MAX_NODES:
+            raise SettingsError(
+                f"the OR-Tools baseline handles at most {MAX_NODES} (viewpoint, target) nodes, "
+                f"not {n}: use --solver heuristic, or fewer --samples"
+            )
         require_partition_memory(instance, self.name, _BYTES_PER_NODE_PAIR)
         started = time.perf_counter()
         clustered = cluster_instance(instance)

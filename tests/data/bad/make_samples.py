@@ -137,10 +137,11 @@ def main() -> None:
     with zipfile.ZipFile(buffer, "w") as kmz:
         kmz.writestr("images/readme.txt", "no KML in here\n")
     (HERE / "kmz_without_kml.kmz").write_bytes(buffer.getvalue())
-    _demo_targets("demo_300_targets.csv", 300)
+    # Not bad input: 300 targets plan; the planning tests fly them.
+    _demo_targets(HERE.parent / "targets" / "demo_300_targets.csv", 300)
 
 
-def _demo_targets(name: str, n: int) -> None:
+def _demo_targets(path: Path, n: int) -> None:
     """``n`` targets at random on the demo site, each amid valid cells (3 cells to nodata)."""
     with rasterio.open(DEMO_SITE) as src:
         valid = src.read_masks(1) > 0
@@ -154,7 +155,7 @@ def _demo_targets(name: str, n: int) -> None:
     lon, lat = to_wgs84.transform(x, y)
     points = enumerate(zip(lat, lon, strict=True), start=1)
     lines = [f"T{i},{a:.9f},{o:.9f}\n" for i, (a, o) in points]
-    (HERE / name).write_text("name,lat,lon\n" + "".join(lines))
+    path.write_text("name,lat,lon\n" + "".join(lines))
 
 
 if __name__ == "__main__":
