@@ -9,7 +9,7 @@ import rasterio
 from rasterio.transform import from_origin
 
 from urpt_gcs.segments import segment_profile
-from urpt_gcs.terrain import area_max, fill_along, open_dem, read_mosaic, read_terrain
+from urpt_gcs.terrain import BlockCache, area_max, fill_along, open_dem, read_mosaic, read_terrain
 
 ORIGIN = (500_000.0, 5_200_000.0)
 RES = 0.5
@@ -84,3 +84,25 @@ def test_area_max_is_the_highest_valid_cell(tmp_path: Path) -> None:
     got = area_max(info, crs, area)
     # read_terrain pads its window by two cells; area_max reads the area's cells only.
     assert want - 0.05 <= got <= want
+
+
+def test_growing_areas_and_the_mosaic_decompress_each_block_once(tmp_path: Path) -> None:
+    """The altitude search's passes and the mosaic share one cache: the same maxima and cells
+    as reading afresh, and no block is decompressed twice."""
+    info = open_dem(_tiled(tmp_path))
+    crs = info.horizontal_crs
+    cache = BlockCache(info)
+    centre = (ORIGIN[0] + 230.0, ORIGIN[1] - 260.0)
+    cones = [_box(300, 400, 40), _box(700, 650, 30)]
+    for half_m in (15.0, 60.0, 130.0, 250.0):
+        area = (centre[0] - half_m, centre[1] - half_m, centre[0] + half_m, centre[1] + half_m)
+        assert area_max(info, crs, area, cache, cones) == area_max(info, crs, area)
+    assert cache.again == 0
+    seen = cache.decompressed
+    assert 0 < len(cache.cells) < seen
+    fresh = read_mosaic(info, crs, cones)
+    shared = read_mosaic(info, crs, cones, cache)
+    np.testing.assert_array_equal(shared.elevation_m, fresh.elevation_m)
+    assert cache.again == 0
+    # Both cones lie inside the last area: their blocks come from the cache.
+    assert cache.decompressed == seen

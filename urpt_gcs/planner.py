@@ -41,6 +41,7 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, choose, prepar
 from urpt_gcs.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
     WGS84,
+    BlockCache,
     DemInfo,
     FloatArray,
     Terrain,
@@ -512,8 +513,21 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
         [*((t.lat_deg, t.lon_deg) for t in site.targets.targets), site.home_lat_lon],
         points_xy,
     )[:-1]
+
+    def cone_boxes(altitude_m: float) -> FloatArray:
+        cones = np.maximum(altitude_m - ground, 0.0) * tan
+        return _boxes(points_xy, np.append(cones, 0.0) + margin)
+
+    # The plane only rises from pass to pass, and the cones widen with it: blocks inside the
+    # cones of the lowest plane possible so far are kept as read, for the mosaic.
+    altitude = (
+        settings.altitude_m
+        if settings.altitude_m is not None
+        else float(ground.max()) + settings.clearance_m
+    )
+    cache = BlockCache(info)
     area = _bbox(points_xy, 0.0)
-    top = area_max(info, crs, area)
+    top = area_max(info, crs, area, cache, cone_boxes(altitude))
     for _ in range(12):
         altitude = (
             settings.altitude_m if settings.altitude_m is not None else (top + settings.clearance_m)
@@ -524,9 +538,8 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
             break
         _require_window(info, cell_m, need, altitude, settings)
         area = need
-        top = area_max(info, crs, area)
-    cones = np.maximum(altitude - ground, 0.0) * tan
-    terrain = read_mosaic(info, crs, _boxes(points_xy, np.append(cones, 0.0) + margin))
+        top = area_max(info, crs, area, cache, cone_boxes(altitude))
+    terrain = read_mosaic(info, crs, cone_boxes(altitude), cache)
     # Heights from the grid planned on: a geographic DEM's fitted georeferencing differs
     # slightly from one grid to the next, and every line of sight ends on the target.
     all_ground = terrain.sample(points_xy[:, 0], points_xy[:, 1])

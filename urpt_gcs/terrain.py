@@ -621,30 +621,115 @@ def pixel_boxes(
     return clipped
 
 
-def area_max(info: DemInfo, crs: pyproj.CRS, area: tuple[float, float, float, float]) -> float:
-    """The highest valid elevation (metres) in ``area``, read one block at a time, so that
-    only a block is ever in memory; NaN when the area holds none."""
-    box = pixel_boxes(info, crs, [area])[0]
+class BlockCache:
+    """What the altitude search has learnt of a DEM's blocks, so that none is decompressed twice.
+
+    For every block read it keeps the block's maximum and its row and column maxima (enough
+    for the exact maximum of a box that cuts the block on one axis only), and the cells of
+    a block a box cuts on both axes or that lies in a camera cone; :func:`read_mosaic` takes
+    the cone blocks from here instead of reading them again. Mutable, owned by one plan.
+    """
+
+    def __init__(self, info: DemInfo) -> None:
+        self.info = info
+        self.block_px: tuple[int, int] | None = None
+        self.maxima: dict[tuple[int, int], tuple[float, FloatArray, FloatArray]] = {}
+        self.cells: dict[tuple[int, int], ElevationArray] = {}
+        self.decompressed = 0
+        self.again = 0
+
+    def block_window(self, j: int, i: int) -> tuple[int, int, int, int]:
+        """Block (row j, column i)'s source cells (col0, row0, col1, row1), clipped."""
+        assert self.block_px is not None
+        bh, bw = self.block_px
+        return (
+            i * bw,
+            j * bh,
+            min((i + 1) * bw, self.info.width_px),
+            min((j + 1) * bh, self.info.height_px),
+        )
+
+
+def _block_cells(
+    info: DemInfo, src: rasterio.io.DatasetReader, window: tuple[int, int, int, int]
+) -> ElevationArray:
+    c0, r0, c1, r1 = window
+    band = src.read(
+        info.band, window=rasterio.windows.Window(c0, r0, c1 - c0, r1 - r0), masked=True
+    )
+    z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m)
+    return z.astype(_storage_dtype(info), copy=False)
+
+
+def _top(z: npt.NDArray[np.floating[Any]], axis: int | None = None) -> Any:
+    """Maximum over valid cells; -inf where there are none."""
+    return np.where(np.isfinite(z), z, -np.inf).max(axis=axis, initial=-np.inf)
+
+
+def area_max(
+    info: DemInfo,
+    crs: pyproj.CRS,
+    area: tuple[float, float, float, float],
+    cache: BlockCache | None = None,
+    keep: npt.ArrayLike | None = None,
+) -> float:
+    """The highest valid elevation (metres) in ``area``; NaN when the area holds none.
+
+    Blocks are read one at a time, and with a ``cache`` each only once over successive calls:
+    a block already read contributes its recorded maxima. The cells of blocks that boxes
+    ``keep`` (xmin, ymin, xmax, ymax in ``crs``) touch are kept in the cache for
+    :func:`read_mosaic`; other blocks' cells are dropped once their maxima are known, unless
+    the area cuts them on both axes (a later, wider area needs their exact maximum).
+    """
+    cache = BlockCache(info) if cache is None else cache
+    box = [int(v) for v in pixel_boxes(info, crs, [area])[0]]
+    keep_px = np.zeros((0, 4), dtype=np.int64) if keep is None else pixel_boxes(info, crs, keep)
     top = -math.inf
     try:
         with _open(info.path) as src:
-            bh, bw = _block_shape(src, info.band)
-            for r in range(int(box[1]) // bh * bh, int(box[3]), bh):
-                for c in range(int(box[0]) // bw * bw, int(box[2]), bw):
-                    c0, r0 = max(c, int(box[0])), max(r, int(box[1]))
-                    c1, r1 = min(c + bw, int(box[2])), min(r + bh, int(box[3]))
-                    if c1 <= c0 or r1 <= r0:
+            if cache.block_px is None:
+                cache.block_px = _block_shape(src, info.band)
+            bh, bw = cache.block_px
+            for j in range(box[1] // bh, -(-box[3] // bh)):
+                for i in range(box[0] // bw, -(-box[2] // bw)):
+                    c0, r0, c1, r1 = cache.block_window(j, i)
+                    a, b = max(c0, box[0]), max(r0, box[1])
+                    c, d = min(c1, box[2]), min(r1, box[3])
+                    if c <= a or d <= b:
                         continue
-                    band = src.read(
-                        info.band,
-                        window=rasterio.windows.Window(c0, r0, c1 - c0, r1 - r0),
-                        masked=True,
+                    cut_cols, cut_rows = (a, c) != (c0, c1), (b, d) != (r0, r1)
+                    key = (j, i)
+                    z = cache.cells.get(key)
+                    if key not in cache.maxima or (z is None and cut_cols and cut_rows):
+                        # A block first seen uncut on an axis is cut on both only when the
+                        # area shrinks, which the altitude search never does.
+                        cache.again += key in cache.maxima
+                        z = _block_cells(info, src, (c0, r0, c1, r1))
+                        cache.decompressed += 1
+                        cache.maxima[key] = (float(_top(z)), _top(z, 0), _top(z, 1))
+                    whole, col_top, row_top = cache.maxima[key]
+                    if cut_cols and cut_rows:
+                        assert z is not None
+                        here = float(_top(z[b - r0 : d - r0, a - c0 : c - c0]))
+                    elif cut_cols:
+                        here = float(col_top[a - c0 : c - c0].max())
+                    elif cut_rows:
+                        here = float(row_top[b - r0 : d - r0].max())
+                    else:
+                        here = whole
+                    top = max(top, here)
+                    kept = bool(
+                        (
+                            (keep_px[:, 0] < c1)
+                            & (keep_px[:, 2] > c0)
+                            & (keep_px[:, 1] < r1)
+                            & (keep_px[:, 3] > r0)
+                        ).any()
                     )
-                    z = _clean(
-                        np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m
-                    )
-                    if np.isfinite(z).any():
-                        top = max(top, float(np.nanmax(z)))
+                    if z is not None and (kept or (cut_cols and cut_rows)):
+                        cache.cells[key] = z
+                    else:
+                        cache.cells.pop(key, None)
     except rasterio.errors.RasterioError as exc:
         raise DemError(
             f"DEM '{info.path}' could not be read ({_first_line(exc)}): "
@@ -653,12 +738,15 @@ def area_max(info: DemInfo, crs: pyproj.CRS, area: tuple[float, float, float, fl
     return top if math.isfinite(top) else math.nan
 
 
-def read_mosaic(info: DemInfo, crs: pyproj.CRS, boxes: npt.ArrayLike) -> Terrain:
+def read_mosaic(
+    info: DemInfo, crs: pyproj.CRS, boxes: npt.ArrayLike, cache: BlockCache | None = None
+) -> Terrain:
     """Read only the source blocks that boxes (xmin, ymin, xmax, ymax) in ``crs`` touch.
 
     The result spans the boxes' union; cells of blocks no box touches are NaN (unknown
     ground), never an elevation. Each block is read once, however many boxes touch it, and
-    only one block's float64 copy is alive at a time.
+    only one block's float64 copy is alive at a time; a block whose cells ``cache`` holds
+    (kept by :func:`area_max`) is taken from it and not read again.
 
     Raises
     ------
@@ -687,13 +775,15 @@ def read_mosaic(info: DemInfo, crs: pyproj.CRS, boxes: npt.ArrayLike) -> Terrain
     try:
         with _open(info.path) as src:
             bh, bw = _block_shape(src, info.band)
+            if cache is not None and cache.block_px not in (None, (bh, bw)):
+                raise ValueError("read_mosaic: the cache was filled with other blocks")
             mask = np.zeros(
                 ((r1 - 1) // bh - r0 // bh + 1, (c1 - 1) // bw - c0 // bw + 1), dtype=np.bool_
             )
             for a, b, c, d in (px - np.array([c0 // bw * bw, r0 // bh * bh] * 2)).tolist():
                 mask[b // bh : (d - 1) // bh + 1, a // bw : (c - 1) // bw + 1] = True
             z = np.full((r1 - r0, c1 - c0), np.nan, dtype=dtype)
-            _read_blocks(info, src, z, window, (bh, bw), mask)
+            _read_blocks(info, src, z, window, (bh, bw), mask, cache)
     except rasterio.errors.RasterioError as exc:
         raise DemError(
             f"DEM '{info.path}' could not be read ({_first_line(exc)}): "
@@ -729,8 +819,10 @@ def _read_blocks(
     window: rasterio.windows.Window,
     block_px: tuple[int, int],
     todo: npt.NDArray[np.bool_],
+    cache: BlockCache | None = None,
 ) -> None:
-    """Read the blocks ``todo`` marks into the grid ``z`` of ``window``, one at a time."""
+    """Read the blocks ``todo`` marks into the grid ``z`` of ``window``, one at a time,
+    taking (and dropping) from ``cache`` those whose cells it holds."""
     bh, bw = block_px
     c0, r0 = int(window.col_off), int(window.row_off)
     c1, r1 = c0 + int(window.width), r0 + int(window.height)
@@ -741,6 +833,14 @@ def _read_blocks(
         c, d = min(bc + bw, c1), min(br + bh, r1)
         if c <= a or d <= b:
             continue
+        key = (br // bh, bc // bw)
+        held = None if cache is None else cache.cells.pop(key, None)
+        if held is not None:
+            z[b - r0 : d - r0, a - c0 : c - c0] = held[b - br : d - br, a - bc : c - bc]
+            continue
+        if cache is not None:
+            cache.again += key in cache.maxima
+            cache.decompressed += 1
         band = src.read(info.band, window=rasterio.windows.Window(a, b, c - a, d - b), masked=True)
         z[b - r0 : d - r0, a - c0 : c - c0] = _clean(
             np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m
