@@ -164,8 +164,8 @@ def make_scale_site(
     OutputError
         When the folder cannot be written.
     """
-    if size_px < 1000:
-        raise SettingsError(f"--size {size_px} is below 1000 px: give a larger raster")
+    if size_px < 500:
+        raise SettingsError(f"--size {size_px} is below 500 px: give a larger raster")
     if n_targets < 1:
         raise SettingsError(f"--targets {n_targets} is below 1: give at least one target")
     try:

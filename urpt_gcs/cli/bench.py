@@ -105,7 +105,7 @@ def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) ->
 @click.option(
     "--size",
     "size_px",
-    type=click.IntRange(min=1000),
+    type=click.IntRange(min=500),
     default=10_000,
     show_default=True,
     help="Side of the synthetic DSM in cells (0.3 m each).",
