@@ -339,8 +339,9 @@ _BYTES_PER_VIEWPOINT = 16.0 + 16.0 + 8.0 + 8.0
 
 def instance_bytes(n_viewpoints: int, n_targets: int) -> float:
     """Memory of a planning instance: linear in the viewpoints (positions, depot legs, owners,
-    sparse cover rows), plus the boolean viewpoint-by-target matrix :func:`cover_sets`
-    returns before it is made sparse (one byte per pair). No distance matrix is kept."""
+    sparse cover rows), plus one byte per viewpoint-target pair: a bound kept from when the
+    cover sets were a dense matrix; :func:`cover_pairs` now needs far less. No distance matrix
+    is kept."""
     n = float(n_viewpoints)
     return n * _BYTES_PER_VIEWPOINT + n * float(n_targets)
 
