@@ -339,8 +339,9 @@ _BYTES_PER_VIEWPOINT = 16.0 + 16.0 + 8.0 + 8.0
 
 def instance_bytes(n_viewpoints: int, n_targets: int) -> float:
     """Memory of a planning instance: linear in the viewpoints (positions, depot legs, owners,
-    sparse cover rows), plus the boolean viewpoint-by-target matrix :func:`cover_sets`
-    returns before it is made sparse (one byte per pair). No distance matrix is kept."""
+    sparse cover rows), plus one byte per viewpoint-target pair: a bound kept from when the
+    cover sets were a dense matrix; :func:`cover_pairs` now needs far less. No distance matrix
+    is kept."""
     n = float(n_viewpoints)
     return n * _BYTES_PER_VIEWPOINT + n * float(n_targets)
 
@@ -361,18 +362,23 @@ def require_instance_memory(n_viewpoints: int, n_targets: int) -> None:
     )
 
 
-def cover_sets(
+def cover_pairs(
     terrain: Terrain,
     viewpoints_xy: FloatArray,
     targets_xy: FloatArray,
     ground_m: FloatArray,
     camera: Camera,
-) -> BoolArray:
-    """Which targets each viewpoint sees: inside the camera cone and in line of sight."""
+    workers: int | None = 1,
+) -> tuple[IntArray, IntArray]:
+    """The (viewpoint, target) index pairs where the viewpoint sees the target.
+
+    Every pair within the cone is found at once through a spatial index and tested by one
+    compiled call, its segments shared among ``workers`` threads (None: every core); the
+    answer does not depend on ``workers``. No array is dense in viewpoints × targets.
+    """
     n, m = len(viewpoints_xy), len(targets_xy)
-    covers = np.zeros((n, m), dtype=bool)
     if n == 0 or m == 0:
-        return covers
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     cone = camera.cone_radius_m(ground_m)
     tree = shapely.STRtree(shapely.points(targets_xy))
     vp_idx, tg_idx = tree.query(
@@ -386,8 +392,25 @@ def cover_sets(
     vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
     eye = np.column_stack([viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)])
     tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
-    seen = line_of_sight(terrain, eye, tgt)
-    covers[vp_idx[seen], tg_idx[seen]] = True
+    seen = line_of_sight(terrain, eye, tgt, workers)
+    return vp_idx[seen].astype(np.int64), tg_idx[seen].astype(np.int64)
+
+
+def cover_sets(
+    terrain: Terrain,
+    viewpoints_xy: FloatArray,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    workers: int | None = 1,
+) -> BoolArray:
+    """Which targets each viewpoint sees, as a dense viewpoints × targets array.
+
+    For a few viewpoints (the oracle, the stop margin); the instance uses `cover_pairs`.
+    """
+    covers = np.zeros((len(viewpoints_xy), len(targets_xy)), dtype=bool)
+    vp_idx, tg_idx = cover_pairs(terrain, viewpoints_xy, targets_xy, ground_m, camera, workers)
+    covers[vp_idx, tg_idx] = True
     return covers
 
 
@@ -399,6 +422,7 @@ def build_instance(
     camera: Camera,
     depot_xy: tuple[float, float] | None,
     terrain_max_m: float,
+    workers: int | None = 1,
 ) -> Instance:
     """Candidate viewpoints with verified cover sets, on the plane (no distance matrix)."""
     nadir = np.asarray(targets_xy, dtype=np.float64)
@@ -416,19 +440,19 @@ def build_instance(
         xy = nadir[own[idx]] + r[:, None] * np.column_stack([np.cos(az[idx]), np.sin(az[idx])])
         eye = np.column_stack([xy, np.full(len(xy), camera.altitude_m)])
         tgt = np.column_stack([nadir[own[idx]], ground_m[own[idx]]])
-        ok = line_of_sight(terrain, eye, tgt)
+        ok = line_of_sight(terrain, eye, tgt, workers)
         points.append(xy[ok])
         owners.append(own[idx[ok]])
         pending[idx[ok]] = False
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
     require_instance_memory(len(viewpoints), len(nadir))
-    covers = cover_sets(terrain, viewpoints, nadir, ground_m, camera)
+    vp_idx, tg_idx = cover_pairs(terrain, viewpoints, nadir, ground_m, camera, workers)
 
     def oracle(points_xy: FloatArray) -> BoolArray:
-        return cover_sets(terrain, np.asarray(points_xy, dtype=np.float64), nadir, ground_m, camera)
+        pts = np.asarray(points_xy, dtype=np.float64)
+        return cover_sets(terrain, pts, nadir, ground_m, camera, workers)
 
-    vp_idx, tg_idx = np.nonzero(covers)
     return Instance.from_cover_pairs(
         vp_idx,
         tg_idx,

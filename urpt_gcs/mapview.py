@@ -106,7 +106,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     ``sortie N``."""
     terrain = plan.terrain
     step = max(1, math.ceil(max(terrain.elevation_m.shape) / _MAX_DISPLAY_PX))
-    z = terrain.elevation_m[::step, ::step]
+    z = np.asarray(terrain.elevation_m[::step, ::step], dtype=np.float64)
     t = terrain.transform
     pixel_to_map = Affine2D.from_values(t.a * step, t.d * step, t.b * step, t.e * step, t.c, t.f)
 

@@ -42,13 +42,17 @@ from urpt_gcs.sorties import SEARCH_SHARE, SortieOrder, order_sorties
 from urpt_gcs.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
     WGS84,
+    BlockCache,
     DemInfo,
     FloatArray,
     Terrain,
+    area_max,
     check_elevations,
+    fill_along,
     open_dem,
     planning_crs,
-    read_terrain,
+    read_mosaic,
+    sample_points,
 )
 from urpt_gcs.visibility import BoolArray, Camera, Region, visibility_regions
 
@@ -81,8 +85,14 @@ class PlanSettings:
     geofence_margin_m: float = 30.0
     position_tolerance_m: float = 1.5
     band: int | None = None
+    workers: int | None = None
 
     def __post_init__(self) -> None:
+        if self.workers is not None and self.workers < 1:
+            raise SettingsError(
+                f"--workers {self.workers} is below 1: give a number of threads, or omit it "
+                "to use every core"
+            )
         if not (
             math.isfinite(self.position_tolerance_m) and 0.0 <= self.position_tolerance_m <= 20.0
         ):
@@ -271,13 +281,12 @@ def _on_dem(info: DemInfo, lat: FloatArray, lon: FloatArray) -> BoolArray:
 
 def _check_ground(
     info: DemInfo,
-    terrain: Terrain,
+    ground: FloatArray,
     names: list[str],
     lat_lon: list[tuple[float, float]],
     xy: FloatArray,
 ) -> FloatArray:
-    """Ground elevation at each point, or an error naming the first point without one."""
-    ground = terrain.sample(xy[:, 0], xy[:, 1])
+    """The ground elevation at each point, or an error naming the first point without one."""
     bad = np.flatnonzero(~np.isfinite(ground))
     if bad.size == 0:
         return ground
@@ -312,8 +321,8 @@ def _require_window(
     """
     width = math.ceil((need[2] - need[0]) / cell_m)
     height = math.ceil((need[3] - need[1]) / cell_m)
-    # The cells as read, as float64 elevations, and the nodata mask.
-    per_cell = np.dtype(info.dtype).itemsize + 8 + 1
+    # The grid spanning the cones holds float64 elevations at most.
+    per_cell = 8
     if settings.altitude_m is not None:
         cause = f"--altitude {altitude_m:g} m"
     else:
@@ -423,6 +432,7 @@ def plan(
         area.camera,
         site.home_xy,
         area.terrain_max_m,
+        settings.workers,
     )
     stages.lap("viewpoints")
     solver = choose(instance, settings.solver)
@@ -520,27 +530,42 @@ def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _S
 
 
 def _read_area(site: _Site, settings: PlanSettings) -> _Area:
-    """Read the DEM window the camera cones need and fix the flight plane.
+    """Read the DEM where the camera cones need it and fix the flight plane.
 
-    Without ``--altitude`` the plane sits ``--clearance`` above the highest terrain read, and
-    a higher plane widens the cones, which may need a larger window: repeat until the window
-    holds them.
+    Without ``--altitude`` the plane sits ``--clearance`` above the highest terrain of the
+    operating area (the box of the points widened by the widest cone), found one block at a
+    time; a higher plane widens the cones, which may widen the area: repeat until it holds
+    them. Then only the source blocks the cone of some target (or home) touches are read.
     """
     info, crs = site.dem, site.crs
     points_xy = np.vstack([site.targets_xy, np.array([site.home_xy])])
     tan = math.tan(math.radians(settings.fov_deg))
-    area = _bbox(points_xy, 0.0)
-    terrain = read_terrain(info, crs, area)
-    margin = _WINDOW_MARGIN_CELLS * terrain.cell_m
+    cell_m = _cell_m(info, crs, points_xy)
+    margin = _WINDOW_MARGIN_CELLS * cell_m
+    # The ground under the points first, from the few cells around each.
     ground = _check_ground(
         info,
-        terrain,
+        sample_points(info, crs, points_xy),
         [*(f"target '{n}'" for n in site.names), f"home ({site.home_source})"],
         [*((t.lat_deg, t.lon_deg) for t in site.targets.targets), site.home_lat_lon],
         points_xy,
     )[:-1]
+
+    def cone_boxes(altitude_m: float) -> FloatArray:
+        cones = np.maximum(altitude_m - ground, 0.0) * tan
+        return _boxes(points_xy, np.append(cones, 0.0) + margin)
+
+    # The plane only rises from pass to pass, and the cones widen with it: blocks inside the
+    # cones of the lowest plane possible so far are kept as read, for the mosaic.
+    altitude = (
+        settings.altitude_m
+        if settings.altitude_m is not None
+        else float(ground.max()) + settings.clearance_m
+    )
+    cache = BlockCache(info)
+    area = _bbox(points_xy, 0.0)
+    top = area_max(info, crs, area, cache, cone_boxes(altitude))
     for _ in range(12):
-        top = float(np.nanmax(terrain.elevation_m))
         altitude = (
             settings.altitude_m if settings.altitude_m is not None else (top + settings.clearance_m)
         )
@@ -548,11 +573,12 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
         need = _bbox(points_xy, reach + margin)
         if _contains(area, need):
             break
-        _require_window(info, terrain.cell_m, need, altitude, settings)
+        _require_window(info, cell_m, need, altitude, settings)
         area = need
-        terrain = read_terrain(info, crs, area)
-    # Heights from the window planned on: a geographic DEM's fitted georeferencing differs
-    # slightly from one window to the next, and every line of sight ends on the target.
+        top = area_max(info, crs, area, cache, cone_boxes(altitude))
+    terrain = read_mosaic(info, crs, cone_boxes(altitude), cache)
+    # Heights from the grid planned on: a geographic DEM's fitted georeferencing differs
+    # slightly from one grid to the next, and every line of sight ends on the target.
     all_ground = terrain.sample(points_xy[:, 0], points_xy[:, 1])
     ground, home_ground = all_ground[:-1], float(all_ground[-1])
     low = np.flatnonzero(ground >= altitude)
@@ -570,6 +596,26 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
     camera = Camera(altitude_m=altitude, fov_deg=settings.fov_deg)
     _check_cone_width(camera, ground, site.names, settings.position_tolerance_m)
     return _Area(terrain, ground, home_ground, top, camera)
+
+
+def _boxes(xy: FloatArray, radius_m: FloatArray) -> FloatArray:
+    """Boxes (xmin, ymin, xmax, ymax) around points, ``radius_m`` out on every side."""
+    r = np.asarray(radius_m, dtype=np.float64)
+    return np.column_stack([xy[:, 0] - r, xy[:, 1] - r, xy[:, 0] + r, xy[:, 1] + r])
+
+
+def _cell_m(info: DemInfo, crs: pyproj.CRS, points_xy: FloatArray) -> float:
+    """The DEM's cell size in metres in the planning CRS near the points."""
+    t = info.transform
+    if not (info.needs_warp or crs != info.horizontal_crs):
+        return float(min(abs(t.a), abs(t.e)))
+    to_src = pyproj.Transformer.from_crs(crs, info.horizontal_crs, always_xy=True)
+    to_crs = pyproj.Transformer.from_crs(info.horizontal_crs, crs, always_xy=True)
+    sx, sy = to_src.transform(float(points_xy[0, 0]), float(points_xy[0, 1]))
+    x0, y0 = to_crs.transform(sx, sy)
+    x1, y1 = to_crs.transform(sx + t.a, sy)
+    x2, y2 = to_crs.transform(sx, sy + t.e)
+    return float(min(math.hypot(x1 - x0, y1 - y0), math.hypot(x2 - x0, y2 - y0)))
 
 
 def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Flight:
@@ -593,7 +639,7 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
         build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
         for s in sorties
     )
-    legs = _check_as_written(site, area, missions, sorties, tour.sees, stop_names)
+    legs = _check_as_written(site, area, missions, sorties, tour.sees, stop_names, settings.workers)
     warnings = check_legs(legs, settings.min_clearance_m)
     stop_ground = area.terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
     warnings += check_height_above_ground(
@@ -654,6 +700,7 @@ def _check_as_written(
     sorties: tuple[Sortie, ...],
     sees: BoolArray,
     stop_names: list[str],
+    workers: int | None,
 ) -> tuple[Leg, ...]:
     """Check the missions as the vehicle will store them, and return their legs.
 
@@ -670,11 +717,15 @@ def _check_as_written(
         at = _xy(site.crs, waypoint_positions(mission))
         stops.append(at)
         path = np.vstack([home_xy, at, home_xy])
+        # The mosaic holds the cones; a leg between them crosses blocks read only now.
+        fill_along(site.dem, area.terrain, path[:-1], path[1:])
         legs += leg_clearances(
             area.terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], eye_m
         )
     written = np.vstack(stops)
-    seen = cover_sets(area.terrain, written, site.targets_xy, area.ground_m, written_camera)
+    seen = cover_sets(
+        area.terrain, written, site.targets_xy, area.ground_m, written_camera, workers
+    )
     lost = np.argwhere(sees & ~seen)
     if lost.size:
         k, t = (int(v) for v in lost[0])

@@ -17,7 +17,10 @@ nodata value, the ground is unknown.
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +34,13 @@ BoolArray = npt.NDArray[np.bool_]
 # Terrain less than this above a line of sight does not block it: the target itself lies on
 # the surface, so at its end the difference is zero up to rounding.
 SIGHT_TOLERANCE_M = 1e-6
+# Below this many segments a thread pool costs more than it saves.
+_MIN_PARALLEL_SEGMENTS = 4096
+
+
+def resolve_workers(workers: int | None) -> int:
+    """The number of threads segment tests use: ``workers``, or every core when None."""
+    return max(1, os.cpu_count() or 1) if workers is None else max(1, int(workers))
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,7 +102,7 @@ def _clip(p0, d, lo, hi, t0, t1):  # type: ignore[no-untyped-def]
     return max(t0, a), min(t1, b)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _profile_kernel(z, c0, r0, h0, c1, r1, h1, excess, at, unknown):  # type: ignore[no-untyped-def]
     """Fill ``excess``, ``at`` and ``unknown`` for segments in padded pixel coordinates.
 
@@ -232,7 +242,10 @@ def _profile_kernel(z, c0, r0, h0, c1, r1, h1, excess, at, unknown):  # type: ig
 
 
 def segment_profile(
-    terrain: Terrain, start_xyz: npt.ArrayLike, end_xyz: npt.ArrayLike
+    terrain: Terrain,
+    start_xyz: npt.ArrayLike,
+    end_xyz: npt.ArrayLike,
+    workers: int | None = 1,
 ) -> SegmentProfile:
     """How far the terrain rises above each straight segment, exactly.
 
@@ -242,6 +255,9 @@ def segment_profile(
         The DEM window; its bilinear surface is the ground.
     start_xyz, end_xyz
         (n, 3) ends of the segments: x, y in the terrain's CRS and height in metres.
+    workers
+        Threads to share the segments among (None: every core); the compiled kernel runs
+        without the GIL, and each segment's answer does not depend on how they are shared.
 
     Returns
     -------
@@ -270,26 +286,40 @@ def segment_profile(
     )
     if ok.size:
         e, t, u = (np.empty(ok.size) for _ in range(3))
-        _profile_kernel(
-            terrain.elevation_m,
+        args = (
             ca[ok] + 1.0,
             ra[ok] + 1.0,
             np.ascontiguousarray(a[ok, 2]),
             cb[ok] + 1.0,
             rb[ok] + 1.0,
             np.ascontiguousarray(b[ok, 2]),
-            e,
-            t,
-            u,
         )
+        z = terrain.elevation_m
+
+        def run(lo: int, hi: int) -> None:
+            c0, r0, h0, c1, r1, h1 = (v[lo:hi] for v in args)
+            _profile_kernel(z, c0, r0, h0, c1, r1, h1, e[lo:hi], t[lo:hi], u[lo:hi])
+
+        threads = min(resolve_workers(workers), max(ok.size // (_MIN_PARALLEL_SEGMENTS // 4), 1))
+        if threads <= 1 or ok.size < _MIN_PARALLEL_SEGMENTS:
+            run(0, ok.size)
+        else:
+            # Several chunks per thread even out segments of very different lengths.
+            bounds = np.linspace(0, ok.size, 4 * threads + 1).astype(np.intp).tolist()
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
+                    future.result()
         excess[ok], at[ok], unknown[ok] = e, t, u
     return SegmentProfile(excess_m=excess, at=at, unknown_fraction=unknown)
 
 
 def clear_of_terrain(
-    terrain: Terrain, start_xyz: npt.ArrayLike, end_xyz: npt.ArrayLike
+    terrain: Terrain,
+    start_xyz: npt.ArrayLike,
+    end_xyz: npt.ArrayLike,
+    workers: int | None = 1,
 ) -> BoolArray:
     """Whether each segment runs over known ground and nowhere below the terrain."""
-    profile = segment_profile(terrain, start_xyz, end_xyz)
+    profile = segment_profile(terrain, start_xyz, end_xyz, workers)
     clear: BoolArray = (profile.unknown_fraction == 0.0) & (profile.excess_m <= SIGHT_TOLERANCE_M)
     return clear

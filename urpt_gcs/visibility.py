@@ -220,10 +220,11 @@ def line_of_sight(
     terrain: Terrain,
     eye_xyz: FloatArray,
     target_xyz: FloatArray,
+    workers: int | None = 1,
 ) -> BoolArray:
     """Whether each straight segment ``eye -> target`` clears the terrain.
 
     Exact on the DEM's bilinear surface (:func:`urpt_gcs.segments.clear_of_terrain`): blocked
     when the terrain rises above the segment anywhere, or the segment crosses unknown ground.
     """
-    return clear_of_terrain(terrain, eye_xyz, target_xyz)
+    return clear_of_terrain(terrain, eye_xyz, target_xyz, workers)

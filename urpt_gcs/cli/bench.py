@@ -91,3 +91,42 @@ def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) ->
         fail(exc)
         return
     click.echo(format_tables(rows))
+
+
+@bench_group.command("scale")
+@click.option(
+    "--targets",
+    "targets",
+    default="100,1000",
+    show_default=True,
+    metavar="N[,N]",
+    help="Target counts, one synthetic site and plan each.",
+)
+@click.option(
+    "--size",
+    "size_px",
+    type=click.IntRange(min=500),
+    default=10_000,
+    show_default=True,
+    help="Side of the synthetic DSM in cells (0.3 m each).",
+)
+@click.option("--seed", type=int, default=1, show_default=True, help="Seed of the sites.")
+@click.option(
+    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
+)
+def bench_scale_command(targets: str, size_px: int, seed: int, out: Path | None) -> None:
+    """Plan synthetic Pix4D-like sites: per-stage wall time, peak RSS, visibility/read ratio."""
+    from urpt_gcs.bench.scale import format_table, run_scale
+
+    try:
+        counts = [int(part) for part in targets.split(",") if part.strip()]
+    except ValueError:
+        raise click.BadParameter(f"{targets!r} is not a list of numbers, e.g. 100,1000") from None
+    try:
+        rows = run_scale(
+            counts, size_px=size_px, out_dir=out, seed=seed, progress=terminal_progress()
+        )
+    except UrptError as exc:
+        fail(exc)
+        return
+    click.echo(format_table(rows))

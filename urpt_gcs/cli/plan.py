@@ -28,6 +28,12 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
     default=None,
     help="Band of the DEM holding the elevations; needed when it has several.",
 )
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Threads for the line-of-sight tests [default: every core].",
+)
 @click.option("--out", "out", default="out", show_default=True, help="Folder for the outputs.")
 @click.option(
     "--fov",
@@ -146,6 +152,7 @@ def plan_command(
     dem: str,
     targets: str,
     band: int | None,
+    workers: int | None,
     out: str,
     fov: float,
     samples: int,
@@ -194,6 +201,7 @@ def plan_command(
             endurance_min=endurance,
             home=parse_home(home),
             band=band,
+            workers=workers,
             solver=solver,
             solve=SolveSettings(time_limit_s=time_limit, seed=seed),
             mission=MissionSettings(
