@@ -545,7 +545,7 @@ def test_ctrl_c_while_modules_load_is_one_line_and_130(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("when", ["1.0", "2.0", "3.0"])
+@pytest.mark.parametrize("when", ["1.0", "2.0", "3.0", "4.5", "6.0"])
 def test_ctrl_c_while_planning_is_one_line_and_130(when: str, tmp_path: Path) -> None:
     """Also while numba compiles (a cold cache), where Ctrl-C lands in callbacks from C."""
     import os

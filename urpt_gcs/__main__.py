@@ -30,20 +30,40 @@ def _interrupt_again(unraisable: Any, previous: Any = sys.unraisablehook) -> Non
     previous(unraisable)
 
 
+_interrupted = threading.Event()
+
+
+def _on_interrupt(signum: int, frame: Any) -> None:
+    # Remember the Ctrl-C: a library caught in the middle may turn it into an error of its own
+    # (numba, interrupted while it compiles, raises "no compiled object yet").
+    _interrupted.set()
+    raise KeyboardInterrupt
+
+
+def _say_interrupted() -> None:
+    try:
+        sys.stderr.write("urpt-gcs: interrupted\n")
+        sys.stderr.flush()
+    finally:
+        sys.exit(INTERRUPTED_EXIT)
+
+
 def run() -> None:
     """Run the command line on ``sys.argv``; Ctrl-C at any moment exits 130 with one line."""
     sys.unraisablehook = _interrupt_again
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _on_interrupt)
     try:
         from urpt_gcs.cli import main
 
         main()
     except KeyboardInterrupt:
         # Imports are not done yet (or click is unwinding): print without click.
-        try:
-            sys.stderr.write("urpt-gcs: interrupted\n")
-            sys.stderr.flush()
-        finally:
-            sys.exit(INTERRUPTED_EXIT)
+        _say_interrupted()
+    except Exception:
+        if _interrupted.is_set():
+            _say_interrupted()
+        raise
 
 
 if __name__ == "__main__":
