@@ -44,9 +44,12 @@ from urpt_gcs.sitl.replay import (
 )
 
 PX4 = SHARED / "px4"
-pytestmark = pytest.mark.skipif(
-    not (PX4 / "run.sh").is_file(), reason=f"no PX4 SITL build (run.sh) in {PX4}"
-)
+pytestmark = [
+    pytest.mark.sitl_real,
+    pytest.mark.skipif(
+        not (PX4 / "run.sh").is_file(), reason=f"no PX4 SITL build (run.sh) in {PX4}"
+    ),
+]
 DEM = DEMO / "site.tif"
 TARGETS = DEMO / "targets.kml"
 SPEEDUP = 10.0
