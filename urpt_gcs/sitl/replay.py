@@ -422,21 +422,15 @@ async def _fly(
         TelemetryAsync(link.system),
         ActionAsync(link.system),
     )
-    watch = _Watch(link, await link.system.get_system_id())
+    system_id = await link.system.get_system_id()
+    watch = _Watch(link, system_id, px4=mission.firmware == "px4")
     await watch.start()
     try:
         await telemetry.set_rate_position(settings.position_rate_hz)
-        if settings.takeoff == "auto-options":
-            await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
-        say("arming")
-        await _arm_when_ready(link, action, watch, ARM_WAIT_S)
-        if settings.takeoff == "guided":
-            await action.set_takeoff_altitude(GUIDED_TAKEOFF_M)
-            await action.takeoff()
-            while not watch.track or watch.track[-1].alt_rel_m < GUIDED_TAKEOFF_M * 0.95:
-                await asyncio.sleep(0.05)
-        say("flying the mission in AUTO")
-        await link.mission.start_mission()
+        if mission.firmware == "px4":
+            await _start_px4(link, system_id, param, action, mission, say)
+        else:
+            await _start_ardupilot(link, param, action, watch, settings, say)
         await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
     except asyncio.TimeoutError:
         raise LinkError(
@@ -457,56 +451,69 @@ async def _fly(
     return Flight(upload, tuple(watch.photos), tuple(watch.track), sim_s, wall_s, vehicle)
 
 
-async def _fly_px4(
+async def _start_ardupilot(
     link: MavsdkLink,
-    mission: Mission,
+    param: ParamAsync,
+    action: ActionAsync,
+    watch: _Watch,
     settings: ReplaySettings,
-    timeout_s: float,
     say: Progress,
-    where: str,
-) -> Flight:
+) -> None:
+    """Arm in GUIDED and start AUTO, taking off as ``settings.takeoff`` says."""
+    if settings.takeoff == "auto-options":
+        await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
+    say("arming")
+    await _arm_when_ready(link, action, watch, ARM_WAIT_S)
+    if settings.takeoff == "guided":
+        await action.set_takeoff_altitude(GUIDED_TAKEOFF_M)
+        await action.takeoff()
+        while not watch.track or watch.track[-1].alt_rel_m < GUIDED_TAKEOFF_M * 0.95:
+            await asyncio.sleep(0.05)
+    say("flying the mission in AUTO")
+    await link.mission.start_mission()
+
+
+async def _start_px4(
+    link: MavsdkLink,
+    system_id: int,
+    param: ParamAsync,
+    action: ActionAsync,
+    mission: Mission,
+    say: Progress,
+) -> None:
     """Arm and MAV_CMD_MISSION_START: PX4 then takes off and flies the mission in AUTO."""
-    upload = await upload_verified(link, mission, UploadSettings(), say)
-    vehicle = await identify(link, where)
-    param, telemetry, action = (
-        ParamAsync(link.system),
-        TelemetryAsync(link.system),
-        ActionAsync(link.system),
-    )
-    system_id = await link.system.get_system_id()
-    watch = _Watch(link, system_id, px4=True)
-    await watch.start()
-    try:
-        # As WPNAV_SPEED for ArduCopter: the cruise speed the plan's timing assumed.
-        await param.set_param_float("MPC_XY_CRUISE", float(mission.cruise_speed_m_s))
-        await telemetry.set_rate_position(settings.position_rate_hz)
-        say("arming")
-        await _arm_retrying(action, ARM_WAIT_S)
-        say("flying the mission (MAV_CMD_MISSION_START)")
-        await _command(link, system_id, mavlink.MAV_CMD_MISSION_START)
-        await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
-    except asyncio.TimeoutError:
-        raise LinkError(f"PX4 did not land within {timeout_s:.0f} s of wall time") from None
-    except MavsdkError as exc:
-        raise LinkError(f"PX4 refused a step of the flight: {exc}") from None
-    finally:
-        await watch.stop()
-        for plugin in (param, telemetry, action):
-            plugin.destroy()
-    sim_s = (watch.disarmed_at_s or 0.0) - (watch.armed_at_s or 0.0)
-    wall_s = (watch.disarmed_at_wall or 0.0) - (watch.armed_at_wall or 0.0)
-    return Flight(upload, tuple(watch.photos), tuple(watch.track), sim_s, wall_s, vehicle)
+    # MPC_XY_CRUISE is the speed PX4 flies between waypoints until the mission's own speed
+    # item applies; the plan's timing assumes that speed.
+    await param.set_param_float("MPC_XY_CRUISE", float(mission.cruise_speed_m_s))
+    say("arming")
+    await _arm_retrying(action, ARM_WAIT_S)
+    say("flying the mission (MAV_CMD_MISSION_START)")
+    await _command(link, system_id, mavlink.MAV_CMD_MISSION_START)
+
+
+async def _send_command(
+    link: MavsdkLink, system_id: int, command: int, *params: float
+) -> int | None:
+    """COMMAND_LONG to the autopilot; the MAV_RESULT it answered, None without an answer."""
+    values = [*params, *(0.0,) * (7 - len(params))]
+    fields: dict[str, Any] = {
+        "target_system": system_id,
+        "target_component": AUTOPILOT,
+        "command": command,
+        "confirmation": 0,
+    }
+    fields |= {f"param{i}": float(v) for i, v in enumerate(values, start=1)}
+    message = MavlinkMessage("COMMAND_LONG", 0, 0, system_id, AUTOPILOT, json.dumps(fields))
+    ack = json.loads((await link.direct.send_command(message)).fields_json or "{}")
+    result = ack.get("result")
+    return result if isinstance(result, int) else None
 
 
 async def _command(link: MavsdkLink, system_id: int, command: int) -> None:
     """COMMAND_LONG without params; LinkError with the vehicle's MAV_RESULT unless accepted."""
-    fields = {"target_system": system_id, "target_component": AUTOPILOT, "command": command}
-    fields |= {"confirmation": 0} | {f"param{i}": 0.0 for i in range(1, 8)}
-    message = MavlinkMessage("COMMAND_LONG", 0, 0, system_id, AUTOPILOT, json.dumps(fields))
-    ack = json.loads((await link.direct.send_command(message)).fields_json or "{}")
-    result = ack.get("result")
+    result = await _send_command(link, system_id, command)
     if result != mavlink.MAV_RESULT_ACCEPTED:
-        entry = mavlink.enums["MAV_RESULT"].get(result) if isinstance(result, int) else None
+        entry = mavlink.enums["MAV_RESULT"].get(result) if result is not None else None
         name = entry.name if entry is not None else "no answer"
         raise LinkError(f"the vehicle did not accept {command_name(command)}: {name}")
 
@@ -526,25 +533,12 @@ async def _arm_retrying(action: ActionAsync, wait_s: float) -> None:
 
 async def _set_mode(link: MavsdkLink, mode: int) -> bool:
     """MAV_CMD_DO_SET_MODE with an ArduCopter custom mode; True if the vehicle accepted it."""
-    fields = {
-        "target_system": await link.system.get_system_id(),
-        "target_component": AUTOPILOT,
-        "command": mavlink.MAV_CMD_DO_SET_MODE,
-        "confirmation": 0,
-        "param1": float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED),
-        "param2": float(mode),
-        "param3": 0.0,
-        "param4": 0.0,
-        "param5": 0.0,
-        "param6": 0.0,
-        "param7": 0.0,
-    }
-    command = MavlinkMessage(message_name="COMMAND_LONG", fields_json=json.dumps(fields))
+    flag = float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+    system_id = await link.system.get_system_id()
     try:
-        ack = await link.direct.send_command(command)
+        result = await _send_command(link, system_id, mavlink.MAV_CMD_DO_SET_MODE, flag, mode)
     except MavsdkError:
         return False
-    result = json.loads(ack.fields_json or "{}").get("result")
     return bool(result == mavlink.MAV_RESULT_ACCEPTED)
 
 
@@ -602,8 +596,6 @@ def fly(mission: Mission, settings: ReplaySettings, progress: Progress | None = 
 
     async def run(url: str, where: str) -> Flight:
         async with connect(url, CONNECT_TIMEOUT_S) as link:
-            if mission.firmware == "px4":
-                return await _fly_px4(link, mission, settings, timeout_s, say, where)
             return await _fly(link, mission, settings, timeout_s, say, where)
 
     if settings.px4 is not None:
