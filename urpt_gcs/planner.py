@@ -420,7 +420,12 @@ def plan(
     stages.lap("terrain")
     stages.say(f"visibility of {len(site.names)} targets")
     regions = visibility_regions(
-        area.terrain, site.targets_xy, area.ground_m, area.camera, settings.samples
+        area.terrain,
+        site.targets_xy,
+        area.ground_m,
+        area.camera,
+        settings.samples,
+        settings.workers,
     )
     stages.lap("visibility")
     stages.say("checking viewpoints")

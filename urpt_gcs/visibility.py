@@ -12,27 +12,30 @@ forbids every ``s > max(s', h / slope(s'))``, and the visible set is the interva
 
 Terrain beyond the drone (``s' >= s``) plays no part, so this stays exact when terrain
 rises above the flight plane. Unknown ground (nodata, outside the DEM) forbids going past it.
-Everything is vectorised over targets, azimuths and samples.
+A compiled kernel walks every target's rays, over as many threads as asked for.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 import shapely
+from numba import njit
 from shapely.geometry import Polygon
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.segments import clear_of_terrain
+from urpt_gcs.segments import clear_of_terrain, resolve_workers
 from urpt_gcs.terrain import FloatArray, Terrain
 
 BoolArray = npt.NDArray[np.bool_]
 
-# Samples per ray-sweep chunk (targets x azimuths x steps), to bound memory.
-_CHUNK_SAMPLES = 1_000_000
+# Below this many targets per thread a thread pool costs more than it saves.
+_MIN_PARALLEL_TARGETS = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,29 +96,80 @@ def azimuths(samples: int) -> FloatArray:
     return np.arange(samples, dtype=np.float64) * (2.0 * math.pi / samples)
 
 
-def _grid_crossings(
-    terrain: Terrain, x0: FloatArray, y0: FloatArray, ux: FloatArray, uy: FloatArray, n: int
-) -> FloatArray:
-    """Distances along rays ``(x0, y0) + s (ux, uy)`` where they cross the lines through pixel
-    centres, the breaks of the bilinear surface: the first ``n`` of each family, with
-    ``inf`` where a ray runs parallel to a family. Shape ``broadcast(x0, ux) + (2n,)``."""
-    inv = ~terrain.transform
-    col0, row0 = terrain.pixel_coords(x0, y0)
-    out = []
-    for start, rate in (
-        (col0, inv.a * np.asarray(ux) + inv.b * np.asarray(uy)),
-        (row0, inv.d * np.asarray(ux) + inv.e * np.asarray(uy)),
-    ):
-        rate = np.asarray(rate, dtype=np.float64)[..., None]
-        start = np.asarray(start, dtype=np.float64)[..., None]
-        first = np.where(rate > 0, np.floor(start) + 1.0, np.ceil(start) - 1.0)
-        lines = first + np.sign(rate) * np.arange(n, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dist = (lines - start) / rate
-        out.append(np.where(np.abs(rate) > 1e-12, dist, np.inf))
-    # The slope of the terrain right at the start: the limit of (z(s) - z(0)) / s.
-    out.append(np.full((*out[0].shape[:-1], 1), 1e-3 * terrain.cell_m))
-    return np.concatenate(np.broadcast_arrays(*out), axis=-1)
+@njit(cache=True)
+def _bilinear(z, col, row):  # type: ignore[no-untyped-def]
+    """The surface at fractional (col, row), centres at whole numbers, exactly as
+    :meth:`urpt_gcs.terrain.Terrain.sample`: NaN outside the grid or next to nodata."""
+    rows, cols = z.shape
+    if not (-0.5 <= col <= cols - 0.5 and -0.5 <= row <= rows - 0.5):
+        return np.nan
+    col = min(max(col, 0.0), cols - 1.0)
+    row = min(max(row, 0.0), rows - 1.0)
+    c0 = min(math.floor(col), max(cols - 2, 0))
+    r0 = min(math.floor(row), max(rows - 2, 0))
+    c1 = min(c0 + 1, cols - 1)
+    r1 = min(r0 + 1, rows - 1)
+    fc = col - c0
+    fr = row - r0
+    top = z[r0, c0] * (1.0 - fc) + z[r0, c1] * fc
+    bottom = z[r1, c0] * (1.0 - fc) + z[r1, c1] * fc
+    return top * (1.0 - fr) + bottom * fr
+
+
+@njit(cache=True)
+def _limit(z, col0, row0, dcol, drow, s, ground, height):  # type: ignore[no-untyped-def]
+    """The farthest plane distance the terrain sample at ``s`` allows (``s`` itself over
+    unknown ground, ``inf`` when the sample is below the target)."""
+    value = _bilinear(z, col0 + dcol * s, row0 + drow * s)
+    if math.isnan(value):
+        return s
+    slope = (value - ground) / s
+    if slope > 0.0:
+        return max(s, height / slope)
+    return np.inf
+
+
+@njit(cache=True, nogil=True)
+def _reach_kernel(z, col0, row0, ground, height, cone, dcol, drow, step, start_s, reach):  # type: ignore[no-untyped-def]
+    """``s*`` of targets ``k`` (pixel coordinates ``col0, row0``) along rays whose pixel
+    rates per metre are ``dcol[a], drow[a]``, into ``reach[k, a]``.
+
+    The samples along a ray are every ``step`` metres, every crossing of a line through pixel
+    centres (where the bilinear surface bends) and ``start_s`` (the slope at the start). Each
+    sample at ``s`` allows no more than some distance of at least ``s``, so once a family of
+    samples passes the best limit so far, none of its later samples can lower it.
+    """
+    for k in range(col0.shape[0]):
+        for a in range(dcol.shape[0]):
+            best = cone[k]
+            if start_s < best:
+                best = min(
+                    best,
+                    _limit(z, col0[k], row0[k], dcol[a], drow[a], start_s, ground[k], height[k]),
+                )
+            i = 1
+            while i * step < best:
+                s = i * step
+                best = min(
+                    best, _limit(z, col0[k], row0[k], dcol[a], drow[a], s, ground[k], height[k])
+                )
+                i += 1
+            for family in range(2):
+                start = col0[k] if family == 0 else row0[k]
+                rate = dcol[a] if family == 0 else drow[a]
+                if abs(rate) <= 1e-12:
+                    continue
+                line = math.floor(start) + 1.0 if rate > 0 else math.ceil(start) - 1.0
+                sign = 1.0 if rate > 0 else -1.0
+                while True:
+                    s = (line - start) / rate
+                    if s >= best:
+                        break
+                    best = min(
+                        best, _limit(z, col0[k], row0[k], dcol[a], drow[a], s, ground[k], height[k])
+                    )
+                    line += sign
+            reach[k, a] = best
 
 
 def ray_reach(
@@ -124,46 +178,57 @@ def ray_reach(
     ground_m: FloatArray,
     camera: Camera,
     azimuth_rad: FloatArray,
+    workers: int | None = 1,
 ) -> FloatArray:
     """``s*`` for every target and azimuth, shape (targets, azimuths).
 
     The terrain is the DEM's bilinear surface. It is sampled along each ray where the ray
     crosses the lines through pixel centres (where that surface bends, so a wall's top edge
-    is hit exactly) and every half cell in between.
+    is hit exactly) and every half cell in between; a compiled kernel walks each ray outwards
+    and stops as soon as no farther sample can matter. ``workers`` threads share the targets
+    (None: every core).
     """
-    step = terrain.cell_m / 2.0
+    targets_xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    ground = np.ascontiguousarray(ground_m, dtype=np.float64)
     m = len(targets_xy)
-    height = camera.altitude_m - ground_m  # (m,)
-    cone = camera.cone_radius_m(ground_m)
     reach = np.zeros((m, len(azimuth_rad)), dtype=np.float64)
+    if m == 0 or len(azimuth_rad) == 0:
+        return reach
+    height = camera.altitude_m - ground
+    cone = np.ascontiguousarray(camera.cone_radius_m(ground))
+    inv = ~terrain.transform
     cos_a, sin_a = np.cos(azimuth_rad), np.sin(azimuth_rad)
-    longest = float(np.max(cone, initial=0.0))
-    n_uniform = max(math.ceil(longest / step), 1)
-    n_cross = math.ceil(longest / terrain.cell_m) + 2
-    per_target = len(azimuth_rad) * (n_uniform + 2 * n_cross + 1)
-    chunk = max(_CHUNK_SAMPLES // per_target, 1)
-    uniform = np.arange(1, n_uniform + 1, dtype=np.float64) * step
-    for lo in range(0, m, chunk):
-        hi = min(lo + chunk, m)
-        x0 = targets_xy[lo:hi, 0, None]
-        y0 = targets_xy[lo:hi, 1, None]
-        cross = _grid_crossings(terrain, x0, y0, cos_a[None, :], sin_a[None, :], n_cross)
-        s = np.concatenate(
-            [np.broadcast_to(uniform, (*cross.shape[:2], n_uniform)), cross], axis=-1
+    dcol = np.ascontiguousarray(inv.a * cos_a + inv.b * sin_a)
+    drow = np.ascontiguousarray(inv.d * cos_a + inv.e * sin_a)
+    col0, row0 = terrain.pixel_coords(targets_xy[:, 0], targets_xy[:, 1])
+    col0, row0 = np.ascontiguousarray(col0), np.ascontiguousarray(row0)
+    step = terrain.cell_m / 2.0
+    start_s = 1e-3 * terrain.cell_m
+    z = terrain.elevation_m
+
+    def run(lo: int, hi: int) -> None:
+        _reach_kernel(
+            z,
+            col0[lo:hi],
+            row0[lo:hi],
+            ground[lo:hi],
+            height[lo:hi],
+            cone[lo:hi],
+            dcol,
+            drow,
+            step,
+            start_s,
+            reach[lo:hi],
         )
-        s = np.where((s > 0.0) & (s < cone[lo:hi, None, None]), s, np.inf)
-        with np.errstate(invalid="ignore"):
-            z = terrain.sample(
-                x0[..., None] + cos_a[None, :, None] * s, y0[..., None] + sin_a[None, :, None] * s
-            )  # (k, d, n)
-        h = height[lo:hi, None, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            slope = (z - ground_m[lo:hi, None, None]) / s
-            limit = np.where(slope > 0.0, np.maximum(s, h / slope), np.inf)
-        limit = np.where(np.isnan(z), s, limit)
-        # Samples at or beyond the cone cannot constrain a viewpoint inside it.
-        limit = np.where(np.isfinite(s), limit, np.inf)
-        reach[lo:hi] = np.minimum(limit.min(axis=2), cone[lo:hi, None])
+
+    threads = min(resolve_workers(workers), max(m // _MIN_PARALLEL_TARGETS, 1))
+    if threads <= 1:
+        run(0, m)
+    else:
+        bounds = np.linspace(0, m, 4 * threads + 1).astype(np.intp).tolist()
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
+                future.result()
     return reach
 
 
@@ -173,6 +238,7 @@ def visibility_regions(
     ground_m: FloatArray,
     camera: Camera,
     samples: int,
+    workers: int | None = 1,
 ) -> tuple[Region, ...]:
     """The visibility region of every target.
 
@@ -188,9 +254,11 @@ def visibility_regions(
         Flight-plane altitude and camera half-angle.
     samples
         Number of azimuths ``d``.
+    workers
+        Threads for the ray walk (None: every core).
     """
     az = azimuths(samples)
-    reach = ray_reach(terrain, targets_xy, ground_m, camera, az)
+    reach = ray_reach(terrain, targets_xy, ground_m, camera, az, workers)
     cone = camera.cone_radius_m(ground_m)
     regions = []
     for i, (x, y) in enumerate(targets_xy):
