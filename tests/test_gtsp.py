@@ -32,11 +32,15 @@ def test_instance_memory_is_refused_naming_viewpoints_and_fix(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setenv(MEMORY_BUDGET_ENV, "1")
-    # Linear in the viewpoints: 20 000 of them once needed a 3 GiB distance matrix.
-    require_instance_memory(20_000, 300)
-    require_instance_memory(1_000_000, 300)
-    with pytest.raises(MemoryBudgetError, match=r"4000000 viewpoints .* 1\.30 GiB, .* --samples"):
-        require_instance_memory(4_000_000, 300)
+    # Linear in the viewpoints and in the pairs that see: 20 000 viewpoints once needed a
+    # 3 GiB distance matrix; 370 000 (10 000 targets at 36 samples) seeing 30 targets each
+    # take under 200 MB.
+    require_instance_memory(20_000, 300_000)
+    require_instance_memory(370_000, 11_100_000)
+    with pytest.raises(
+        MemoryBudgetError, match=r"4000000 viewpoints \(80000000 .* 1\.37 GiB, .* --samples"
+    ):
+        require_instance_memory(4_000_000, 80_000_000)
 
 
 def test_cover_sets_on_threads_equal_the_serial_ones() -> None:
@@ -129,3 +133,47 @@ def test_solvers_agree_on_explicit_and_plane_forms(solver: str, depot: bool) -> 
     b = solve(plane, solver, settings)
     assert b.length == pytest.approx(a.length, rel=1e-9)
     assert b.length == pytest.approx(plane.tour_length(b.order), rel=1e-12)
+
+
+def test_cover_pairs_in_chunks_are_every_pair_in_sight_and_refuse_over_budget(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Gathered a chunk of viewpoints at a time, the pairs are exactly those within the cone
+    whose line of sight clears (tested pair by pair here); a budget too small for them is
+    refused with the figure before the chunk that would pass it is kept."""
+    import urpt_gcs.gtsp as gtsp
+    from urpt_gcs.visibility import line_of_sight
+
+    rng = np.random.default_rng(8)
+    z = 100.0 + 6.0 * rng.random((200, 200))
+    z[90:95, :] = 135.0
+    terrain = Terrain(
+        elevation_m=z,
+        transform=Affine(0.5, 0.0, 0.0, 0.0, -0.5, 100.0),
+        crs=pyproj.CRS.from_epsg(32632),
+        source="random",
+        read_window_px=(0, 0, 200, 200),
+        source_shape_px=(200, 200),
+    )
+    targets = rng.uniform(10.0, 90.0, (25, 2))
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    viewpoints = rng.uniform(0.0, 100.0, (700, 2))
+    camera = Camera(altitude_m=150.0, fov_deg=25.0)
+    cone = camera.cone_radius_m(ground)
+    want = set()
+    for i, (vx, vy) in enumerate(viewpoints):
+        for t in range(len(targets)):
+            if np.hypot(vx - targets[t, 0], vy - targets[t, 1]) <= cone[t]:
+                eye = np.array([[vx, vy, camera.altitude_m]])
+                tgt = np.array([[targets[t, 0], targets[t, 1], ground[t]]])
+                if line_of_sight(terrain, eye, tgt)[0]:
+                    want.add((i, t))
+    monkeypatch.setattr(gtsp, "_PAIR_CHUNK_VIEWPOINTS", 64)
+    vp, tg = cover_pairs(terrain, viewpoints, targets, ground, camera)
+    assert len(want) > 500
+    assert set(zip(vp.tolist(), tg.tolist(), strict=True)) == want
+    assert len(vp) == len(want)
+    gib = (700 * 48 + 16 * len(want) / 2) / 2**30
+    monkeypatch.setenv(MEMORY_BUDGET_ENV, f"{gib:.12f}")
+    with pytest.raises(MemoryBudgetError, match=r"700 viewpoints \(\d+ viewpoint-target pairs\)"):
+        cover_pairs(terrain, viewpoints, targets, ground, camera)

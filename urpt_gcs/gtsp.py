@@ -335,18 +335,20 @@ def euclidean_matrix(points_xy: FloatArray) -> FloatArray:
 # Bytes per viewpoint of a planning instance on the plane: its position, the two depot legs,
 # its owner and its cover-row offset.
 _BYTES_PER_VIEWPOINT = 16.0 + 16.0 + 8.0 + 8.0
+# Bytes per (viewpoint, target) pair that sees: its two indices.
+_BYTES_PER_PAIR = 16.0
+# Viewpoints whose candidate pairs are gathered and tested at once.
+_PAIR_CHUNK_VIEWPOINTS = 20_000
 
 
-def instance_bytes(n_viewpoints: int, n_targets: int) -> float:
+def instance_bytes(n_viewpoints: int, n_pairs: int) -> float:
     """Memory of a planning instance: linear in the viewpoints (positions, depot legs, owners,
-    sparse cover rows), plus one byte per viewpoint-target pair: a bound kept from when the
-    cover sets were a dense matrix; :func:`cover_pairs` now needs far less. No distance matrix
-    is kept."""
-    n = float(n_viewpoints)
-    return n * _BYTES_PER_VIEWPOINT + n * float(n_targets)
+    cover-row offsets) and in the (viewpoint, target) pairs where one sees the other (two
+    indices each, while they are gathered). No distance matrix is kept."""
+    return float(n_viewpoints) * _BYTES_PER_VIEWPOINT + float(n_pairs) * _BYTES_PER_PAIR
 
 
-def require_instance_memory(n_viewpoints: int, n_targets: int) -> None:
+def require_instance_memory(n_viewpoints: int, n_pairs: int) -> None:
     """Refuse a planning instance whose arrays would not fit the memory budget.
 
     Raises
@@ -356,8 +358,8 @@ def require_instance_memory(n_viewpoints: int, n_targets: int) -> None:
         number of targets).
     """
     require_memory(
-        instance_bytes(n_viewpoints, n_targets),
-        f"the cover sets of {n_viewpoints} viewpoints ({n_targets} targets)",
+        instance_bytes(n_viewpoints, n_pairs),
+        f"the cover sets of {n_viewpoints} viewpoints ({n_pairs} viewpoint-target pairs)",
         "use fewer --samples, or fewer targets per plan",
     )
 
@@ -372,28 +374,45 @@ def cover_pairs(
 ) -> tuple[IntArray, IntArray]:
     """The (viewpoint, target) index pairs where the viewpoint sees the target.
 
-    Every pair within the cone is found at once through a spatial index and tested by one
-    compiled call, its segments shared among ``workers`` threads (None: every core); the
-    answer does not depend on ``workers``. No array is dense in viewpoints × targets.
+    The pairs within the cone are found through a spatial index and tested by one compiled
+    call per chunk of viewpoints, its segments shared among ``workers`` threads (None: every
+    core); the answer does not depend on ``workers``. Only a chunk's candidate pairs exist at
+    once, and before a chunk's pairs are kept the instance so far is checked against the
+    memory budget. No array is dense in viewpoints × targets.
+
+    Raises
+    ------
+    MemoryBudgetError
+        When the pairs seen so far would take the instance over the budget.
     """
     n, m = len(viewpoints_xy), len(targets_xy)
     if n == 0 or m == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     cone = camera.cone_radius_m(ground_m)
     tree = shapely.STRtree(shapely.points(targets_xy))
-    vp_idx, tg_idx = tree.query(
-        shapely.points(viewpoints_xy), predicate="dwithin", distance=float(cone.max())
-    )
-    horizontal = np.hypot(
-        viewpoints_xy[vp_idx, 0] - targets_xy[tg_idx, 0],
-        viewpoints_xy[vp_idx, 1] - targets_xy[tg_idx, 1],
-    )
-    in_cone = horizontal <= cone[tg_idx]
-    vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
-    eye = np.column_stack([viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)])
-    tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
-    seen = line_of_sight(terrain, eye, tgt, workers)
-    return vp_idx[seen].astype(np.int64), tg_idx[seen].astype(np.int64)
+    found_vp: list[IntArray] = []
+    found_tg: list[IntArray] = []
+    kept = 0
+    for lo in range(0, n, _PAIR_CHUNK_VIEWPOINTS):
+        hi = min(lo + _PAIR_CHUNK_VIEWPOINTS, n)
+        vp_idx, tg_idx = tree.query(
+            shapely.points(viewpoints_xy[lo:hi]), predicate="dwithin", distance=float(cone.max())
+        )
+        vp_idx = vp_idx + lo
+        horizontal = np.hypot(
+            viewpoints_xy[vp_idx, 0] - targets_xy[tg_idx, 0],
+            viewpoints_xy[vp_idx, 1] - targets_xy[tg_idx, 1],
+        )
+        in_cone = horizontal <= cone[tg_idx]
+        vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
+        eye = np.column_stack([viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)])
+        tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
+        seen = line_of_sight(terrain, eye, tgt, workers)
+        kept += int(seen.sum())
+        require_instance_memory(n, kept)
+        found_vp.append(vp_idx[seen].astype(np.int64))
+        found_tg.append(tg_idx[seen].astype(np.int64))
+    return np.concatenate(found_vp), np.concatenate(found_tg)
 
 
 def cover_sets(
@@ -446,7 +465,8 @@ def build_instance(
         pending[idx[ok]] = False
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
-    require_instance_memory(len(viewpoints), len(nadir))
+    # Every viewpoint sees at least the target it was made for.
+    require_instance_memory(len(viewpoints), len(viewpoints))
     vp_idx, tg_idx = cover_pairs(terrain, viewpoints, nadir, ground_m, camera, workers)
 
     def oracle(points_xy: FloatArray) -> BoolArray:

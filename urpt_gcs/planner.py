@@ -506,13 +506,15 @@ def plan(
 def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _Site:
     """Read the targets and the DEM's description; place them in the planning CRS."""
     targets = read_targets(targets_path)
-    # Every target is a viewpoint (its nadir), so this refuses, before any work, a target
-    # count whose distance matrix could not fit even without the boundary viewpoints.
+    # Every target offers its nadir and a viewpoint per azimuth, each seeing at least its own
+    # target: refuse, before any work, a target count whose instance could not fit.
     m = len(targets.targets)
+    n = m * (settings.samples + 1)
     require_memory(
-        instance_bytes(m, m),
-        f"{m} targets in {targets.source!r}: the distance matrix of their nadir points alone",
-        "plan fewer targets at a time (split the file)",
+        instance_bytes(n, n),
+        f"{m} targets in {targets.source!r} at --samples {settings.samples}: "
+        f"{n} viewpoints and their cover sets",
+        "plan fewer targets at a time (split the file) or use fewer --samples",
     )
     info = open_dem(dem_path, settings.band)
     home_lat, home_lon, home_source = _pick_home(targets, settings)
