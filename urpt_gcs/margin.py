@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import numpy.typing as npt
@@ -19,7 +20,7 @@ import numpy.typing as npt
 from urpt_gcs.gtsp import cover_sets
 from urpt_gcs.solvers import Tour
 from urpt_gcs.terrain import FloatArray, Terrain
-from urpt_gcs.visibility import Camera
+from urpt_gcs.visibility import Camera, line_of_sight
 
 # Points on the ring around each stop, besides the stop itself.
 RING_POINTS = 8
@@ -34,6 +35,59 @@ def _ring(point: FloatArray, radius_m: float) -> FloatArray:
     angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
     ring = point + radius_m * np.column_stack([np.cos(angles), np.sin(angles)])
     return np.vstack([point[None, :], ring])
+
+
+def _holding(
+    terrain: Terrain,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    points_xy: FloatArray,
+    sees: npt.NDArray[np.bool_],
+    tolerance_m: float,
+) -> npt.NDArray[np.bool_]:
+    """Which stops see every target they are counted for from all of their ring, tested
+    in one call: the cone from every ring point, then every line of sight."""
+    stop, target = np.nonzero(sees)
+    angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
+    offsets = np.vstack(
+        [[0.0, 0.0], tolerance_m * np.column_stack([np.cos(angles), np.sin(angles)])]
+    )
+    eye_xy = (points_xy[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+    pair_stop = np.repeat(stop, len(offsets))
+    pair_target = np.repeat(target, len(offsets))
+    horizontal = np.hypot(*(eye_xy - targets_xy[pair_target]).T)
+    ok = horizontal <= camera.cone_radius_m(ground_m[pair_target])
+    eye = np.column_stack([eye_xy[ok], np.full(int(ok.sum()), camera.altitude_m)])
+    tgt = np.column_stack([targets_xy[pair_target[ok]], ground_m[pair_target[ok]]])
+    ok[ok] = line_of_sight(terrain, eye, tgt)
+    failed = np.zeros(len(points_xy), dtype=bool)
+    failed[pair_stop[~ok]] = True
+    return ~failed
+
+
+def _tries(
+    stops_xy: FloatArray, sees: npt.NDArray[np.bool_], targets_xy: FloatArray, tolerance_m: float
+) -> Iterator[Callable[[npt.NDArray[np.intp]], FloatArray]]:
+    """The places a failing stop is tried at, in order, each as a function of the stops still
+    failing: on the way towards the mean of its targets, then on rings around it."""
+    stop, target = np.nonzero(sees)
+    counts = np.maximum(np.bincount(stop, minlength=len(stops_xy)), 1)
+    aim = np.column_stack(
+        [np.bincount(stop, targets_xy[target, i], len(stops_xy)) / counts for i in range(2)]
+    )
+
+    def towards(step: float) -> Callable[[npt.NDArray[np.intp]], FloatArray]:
+        return lambda k: stops_xy[k] + step * (aim[k] - stops_xy[k])
+
+    def shifted(shift: FloatArray) -> Callable[[npt.NDArray[np.intp]], FloatArray]:
+        return lambda k: stops_xy[k] + shift
+
+    for step in _STEPS:
+        yield towards(float(step))
+    for radius in tolerance_m * _SEARCH_RADII:
+        for angle in np.arange(_SEARCH_ANGLES) * (2.0 * math.pi / _SEARCH_ANGLES):
+            yield shifted(radius * np.array([math.cos(angle), math.sin(angle)]))
 
 
 def robust_tour(
@@ -96,17 +150,32 @@ def robust_tour(
                     return around
         return None
 
-    for k, point in enumerate(np.asarray(tour.points_xy, dtype=np.float64)):
+    stops_xy = np.asarray(tour.points_xy, dtype=np.float64)
+
+    def holding(points_xy: FloatArray, rows: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+        return _holding(terrain, targets_xy, ground_m, camera, points_xy, rows, tolerance_m)
+
+    settled = holding(stops_xy, tour.sees)
+    # Stops that fail are searched for all at once, try by try in the order `place` takes.
+    spots = stops_xy.copy()
+    for offset in _tries(stops_xy, tour.sees, targets_xy, tolerance_m):
+        pending = np.flatnonzero(~settled)
+        if pending.size == 0:
+            break
+        tried = offset(pending)
+        ok = holding(tried, tour.sees[pending])
+        spots[pending[ok]] = tried[ok]
+        settled[pending[ok]] = True
+    for k, point in enumerate(stops_xy):
         must = np.flatnonzero(tour.sees[k])
-        if must.size == 0 or holds(point, must):
+        if must.size == 0 or (settled[k] and np.array_equal(spots[k], point)):
             points.append(point)
             sees.append(tour.sees[k])
             order.append(tour.order[k])
             continue
         changed = True
-        moved = place(point, must)
-        if moved is not None:
-            points.append(moved)
+        if settled[k]:
+            points.append(spots[k])
             sees.append(tour.sees[k])
             order.append(-1)
             continue

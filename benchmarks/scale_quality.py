@@ -1,0 +1,97 @@
+"""Benchmark: the solve stage at operator scale, its time and the quality of its tours.
+
+    .venv/bin/python benchmarks/scale_quality.py [--size PX] [--time-limit S] [--seed N]
+
+On the synthetic sites of ``urpt-gcs bench scale`` (seeded hills, buildings, nodata border):
+
+- 300 targets at ``--time-limit`` (default 5 s): the wall time of the solve stage as the plan
+  reports it, which should stay within 10 % of the limit.
+- 1000 targets: the heuristic's tour at the limit against a run of it ten times as long on the
+  same instance, and against OR-Tools at the same limit. OR-Tools takes at most
+  ``routing.MAX_NODES`` (viewpoint, target) nodes, so that comparison is made on the instance
+  of the coarsest ``--samples`` it accepts, both solvers on that one instance.
+
+Every tour is checked to see every target. Lengths are of the closed tour from home, before
+it is cut into sorties.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from urpt_gcs.bench.scale import make_scale_site
+from urpt_gcs.gtsp import Instance
+from urpt_gcs.planner import PlanSettings, plan
+from urpt_gcs.solvers import SolveSettings, Tour, solve
+from urpt_gcs.solvers.clustered import partition_nodes
+from urpt_gcs.solvers.routing import MAX_NODES
+
+
+def _checked(instance: Instance, tour: Tour) -> Tour:
+    if -1 in tour.order:
+        sys.exit(f"{tour.solver}: a stop that is not an instance viewpoint")
+    missed = instance.uncovered(tour.order)
+    if missed:
+        sys.exit(f"{tour.solver}: {len(missed)} targets unseen")
+    return tour
+
+
+def _solve(instance: Instance, name: str, limit_s: float, seed: int) -> tuple[Tour, float]:
+    started = time.perf_counter()
+    tour = solve(instance, name, SolveSettings(time_limit_s=limit_s, seed=seed))
+    return _checked(instance, tour), time.perf_counter() - started
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=10_000)
+    ap.add_argument("--time-limit", type=float, default=5.0)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    limit = args.time_limit
+    with tempfile.TemporaryDirectory(prefix="urpt-scale-quality-") as tmp:
+        site300 = make_scale_site(Path(tmp) / "s300", args.size, 300, args.seed)
+        settings = PlanSettings(solver="heuristic", solve=SolveSettings(time_limit_s=limit))
+        p = plan(site300.dsm_path, site300.targets_path, settings)
+        print(
+            f"300 targets: solve stage {p.timings_s['solve']:.2f} s at --time-limit {limit:g} "
+            f"({p.instance.n_viewpoints} viewpoints), tour {p.tour.length:.0f} m"
+        )
+
+        site = make_scale_site(Path(tmp) / "s1000", args.size, 1000, args.seed)
+        p = plan(site.dsm_path, site.targets_path, settings)
+        inst = p.instance
+        base, base_s = _solve(inst, "heuristic", limit, 0)
+        long, long_s = _solve(inst, "heuristic", 10 * limit, 0)
+        print(
+            f"1000 targets, --samples {settings.samples} ({inst.n_viewpoints} viewpoints): "
+            f"heuristic {limit:g} s: {base.length:.0f} m ({base_s:.1f} s); "
+            f"{10 * limit:g} s: {long.length:.0f} m ({long_s:.1f} s), "
+            f"the short run {100 * (base.length / long.length - 1):+.2f} %"
+        )
+
+        for samples in (16, 12, 8, 6, 4, 3):
+            coarse = PlanSettings(
+                solver="heuristic", samples=samples, solve=SolveSettings(time_limit_s=limit)
+            )
+            q = plan(site.dsm_path, site.targets_path, coarse)
+            if partition_nodes(q.instance) <= MAX_NODES:
+                break
+        else:
+            sys.exit("no --samples gives an instance OR-Tools accepts")
+        heur, heur_s = _solve(q.instance, "heuristic", limit, 0)
+        ort, ort_s = _solve(q.instance, "ortools", limit, 0)
+        print(
+            f"1000 targets, --samples {samples} ({q.instance.n_viewpoints} viewpoints, "
+            f"{partition_nodes(q.instance)} nodes): heuristic {heur.length:.0f} m "
+            f"({heur_s:.1f} s), OR-Tools {ort.length:.0f} m ({ort_s:.1f} s): OR-Tools "
+            f"{100 * (ort.length / heur.length - 1):+.2f} %"
+        )
+
+
+if __name__ == "__main__":
+    main()
