@@ -237,3 +237,96 @@ def test_2000_clusters_on_the_plane_within_the_time_limit_and_linear_memory() ->
     assert _BYTES_PER_NODE * n < 0.01 * 8.0 * n * n
     # Far shorter than visiting the targets in file order (random places).
     assert tour.length < 0.2 * instance.tour_length(np.arange(0, 6 * 2000, 6))
+
+
+def test_node_reselection_beyond_the_work_cap_descends_and_stays_a_tour() -> None:
+    """Past the exact programme's work cap, nodes are re-chosen one cluster at a time: each
+    ends up the cheapest of its cluster between its neighbours' nodes (checked here by
+    trying them all), the order is kept and the tour never gets longer."""
+    from urpt_gcs.solvers import _ls_kernels as ls
+    from urpt_gcs.solvers.heuristic import _prepare
+
+    instance = plane_instance(300, 12)
+    p = _prepare(cluster_instance(instance), SearchSettings().neighbours)
+    m = p.m
+    rng = np.random.default_rng(4)
+    order = rng.permutation(m)
+    t = np.array([rng.integers(p.start[c], p.start[c + 1]) for c in order], dtype=np.int32)
+    before = t.copy()
+    q = (np.zeros(m, np.int32), np.zeros(m, np.bool_), np.zeros(1, np.int64))
+    pos = np.full(m, -1, dtype=np.int32)
+
+    def length(tour: np.ndarray) -> float:
+        xy = p.xy[tour]
+        return float(np.hypot(*(xy - np.roll(xy, -1, axis=0)).T).sum())
+
+    cost = ls.reopt_nodes(p.kernel_args, t, m, pos, length(t), q)
+    exact = t.copy()
+    assert cost <= length(before) + 1e-9
+    t = before.copy()
+    cost = ls.descend_nodes(p.kernel_args, t, m, q)
+    assert cost == pytest.approx(length(t)) and cost <= length(before) + 1e-9
+    assert np.array_equal(p.cl[t], p.cl[before])
+    assert length(exact) <= cost + 1e-6  # the exact choice is never worse
+    stable = 0
+    for i in range(m):
+        a, b = p.xy[t[i - 1]], p.xy[t[(i + 1) % m]]
+        c = p.cl[t[i]]
+        nodes = np.arange(p.start[c], p.start[c + 1])
+        costs = np.hypot(*(p.xy[nodes] - a).T) + np.hypot(*(p.xy[nodes] - b).T)
+        here = np.hypot(*(p.xy[t[i]] - a)) + np.hypot(*(p.xy[t[i]] - b))
+        stable += here <= costs.min() + 1e-9
+    assert stable >= 0.95 * m  # a sweep's last changes may leave a few to the next sweep
+
+
+def test_large_instances_rank_neighbours_by_centroid_and_still_solve(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With node-level neighbour ranking capped off, each cluster's neighbours are the
+    clusters of the nearest centroids, and the search still returns a tour that sees every
+    target, no worse than twice the uncapped one."""
+    import urpt_gcs.solvers.heuristic as heuristic
+    from urpt_gcs.solvers.heuristic import _nearest_clusters
+
+    instance = plane_instance(400, 6)
+    settings = SolveSettings(time_limit_s=1.0, seed=0)
+    full = HeuristicSolver().solve(instance, settings)
+    monkeypatch.setattr(heuristic, "_NODE_RANKED_NODES", 0)
+    clustered = cluster_instance(instance)
+    xy = np.asarray(clustered.xy)
+    cl = clustered.cluster.astype(np.int32)
+    nbr = _nearest_clusters(xy, cl, clustered.n_clusters, 5)
+    centre = np.array([xy[cl == c].mean(axis=0) for c in range(clustered.n_clusters)])
+    for c in (0, 17, 250):
+        gap = np.hypot(*(centre - centre[c]).T)
+        gap[c] = np.inf
+        assert set(nbr[c].tolist()) == set(np.argsort(gap)[:5].tolist())
+    capped = HeuristicSolver().solve(instance, settings)
+    assert not instance.uncovered(capped.order)
+    assert capped.length <= 2.0 * full.length
+
+
+def test_node_reselection_past_the_cap_is_the_descent() -> None:
+    """400 clusters of 100 nodes: the exact programme would take 4e8 evaluations, over the
+    cap, so re-selection is the one-at-a-time descent (the same tour as calling it)."""
+    from urpt_gcs.solvers import _ls_kernels as ls
+
+    m, size = 400, 100
+    assert size * m * size * size > ls.DP_WORK_CAP
+    rng = np.random.default_rng(9)
+    cl = np.repeat(np.arange(m, dtype=np.int32), size)
+    xy = rng.random((m, 2))[cl] * 1000.0 + rng.normal(scale=20.0, size=(m * size, 2))
+    start = np.arange(0, m * size + 1, size, dtype=np.int32)
+    empty = np.zeros((0, 0))
+    nbr = np.zeros((m, 1), dtype=np.int32)
+    P = (empty, empty, np.ascontiguousarray(xy), start, cl, nbr, empty, 1)
+    t = (start[:-1] + rng.integers(0, size, m)).astype(np.int32)
+    other = t.copy()
+
+    def q() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return (np.zeros(m, np.int32), np.zeros(m, np.bool_), np.zeros(1, np.int64))
+
+    pos = np.full(m, -1, dtype=np.int32)
+    cost = ls.reopt_nodes(P, t, m, pos, ls.cycle_cost(P, t, m), q())
+    assert cost == ls.descend_nodes(P, other, m, q())
+    assert np.array_equal(t, other)

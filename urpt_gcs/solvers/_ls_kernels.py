@@ -28,6 +28,11 @@ EPS = 1e-9
 # Bits of the ``moves`` argument of local_search: the distances are symmetric; use 2-opt;
 # use Or-opt. Moving single clusters and the exact node choice are always on.
 SYMMETRIC, TWO_OPT, OR_OPT = 1, 2, 4
+# Distance evaluations one exact node re-selection may take; beyond it (thousands of clusters
+# of hundreds of nodes each) the nodes are re-chosen one cluster at a time instead.
+DP_WORK_CAP = 300_000_000
+# Sweeps of that one-at-a-time re-selection, at most.
+_DESCENT_SWEEPS = 4
 
 
 @njit(cache=True)
@@ -154,11 +159,40 @@ def best_insertion(P, t, n, pos, c):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def descend_nodes(P, t, m, Q):  # type: ignore[no-untyped-def]
+    """Re-choose each cluster's node, one at a time, as the cheapest between its neighbours'
+    current nodes; sweep until nothing changes (or ``_DESCENT_SWEEPS`` sweeps). Changed
+    clusters are queued in ``Q``. Never lengthens the tour; returns its cost."""
+    _, _, _, start, cl, _, _, _ = P
+    for _sweep in range(_DESCENT_SWEEPS):
+        changed = False
+        for i in range(m):
+            a = t[i - 1] if i > 0 else t[m - 1]
+            b = t[i + 1] if i + 1 < m else t[0]
+            c = cl[t[i]]
+            best_v = t[i]
+            best = dist(P, a, best_v) + dtr(P, b, best_v)
+            for v in range(start[c], start[c + 1]):
+                cost = dist(P, a, v) + dtr(P, b, v)
+                if cost < best - EPS:
+                    best, best_v = cost, v
+            if best_v != t[i]:
+                t[i] = best_v
+                push(Q, c)
+                changed = True
+        if not changed:
+            break
+    return cycle_cost(P, t, m)
+
+
+@njit(cache=True)
 def reopt_nodes(P, t, m, pos, best_cost, Q):  # type: ignore[no-untyped-def]
     """Best node per cluster for the cluster order of ``t[:m]`` (exact); rewrite ``t`` if shorter.
 
     A shortest path through the layered graph of cluster members, once from each node of the
     smallest cluster, which closes the cycle. Clusters whose node changed are queued in ``Q``.
+    When that would take more than ``DP_WORK_CAP`` distance evaluations, the nodes are
+    re-chosen one cluster at a time instead (:func:`descend_nodes`), which is not exact.
     Returns the cost of ``t`` afterwards.
     """
     _, _, _, start, cl, _, _, _ = P
@@ -169,6 +203,13 @@ def reopt_nodes(P, t, m, pos, best_cost, Q):  # type: ignore[no-untyped-def]
         c, cs = cl[t[i]], cl[t[s]]
         if start[c + 1] - start[c] < start[cs + 1] - start[cs]:
             s = i
+    work = 0.0
+    for i in range(m):
+        c, prev = cl[t[i]], cl[t[i - 1]]
+        work += float(start[c + 1] - start[c]) * float(start[prev + 1] - start[prev])
+    cs = cl[t[s]]
+    if work * float(start[cs + 1] - start[cs]) > DP_WORK_CAP:
+        return descend_nodes(P, t, m, Q)
     lab = np.empty(start[-1])
     back = np.empty(start[-1], np.int32)
     out = np.empty(m, np.int32)

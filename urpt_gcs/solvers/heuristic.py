@@ -66,6 +66,8 @@ _BYTES_PER_NODE = 320.0
 _PLANE_NEIGHBOURS = 16
 # Nodes per k-d tree query, which bounds its temporaries.
 _QUERY_NODES = 1 << 16
+# Above this many nodes, clusters are ranked as neighbours by their centroids alone.
+_NODE_RANKED_NODES = 1_000_000
 # From this many clusters on, a fresh tour follows a Hilbert curve over the cluster centres
 # (then the cycle programme picks the nodes) instead of random cheapest insertion, whose
 # cost grows with the square of the clusters and which the clock cannot interrupt.
@@ -194,14 +196,16 @@ def _nearest_clusters(xy: F64, cl: I32, m: int, k: int) -> I32:
 
     Clusters are ranked by the closest pair of their nodes among each node's nearest nodes;
     each cluster's nearest centroids come after those, so that a cluster crowded by its own
-    nodes still gets ``k`` neighbours.
+    nodes still gets ``k`` neighbours. Beyond ``_NODE_RANKED_NODES`` nodes only the centroids
+    rank (sorting every node's neighbours would take longer than the search).
     """
     n = len(xy)
     per_node = min(n, k + 4)
-    tree = cKDTree(xy)
     keys: list[npt.NDArray[np.int64]] = []
     gaps: list[F64] = []
-    for lo in range(0, n, _QUERY_NODES):
+    tree = cKDTree(xy) if n <= _NODE_RANKED_NODES else None
+    for lo in range(0, n if tree is not None else 0, _QUERY_NODES):
+        assert tree is not None
         gap, idx = tree.query(xy[lo : lo + _QUERY_NODES], k=per_node)
         a = np.repeat(cl[lo : lo + _QUERY_NODES].astype(np.int64), per_node)
         key = a * m + cl[idx.ravel()]
