@@ -330,3 +330,44 @@ def test_node_reselection_past_the_cap_is_the_descent() -> None:
     cost = ls.reopt_nodes(P, t, m, pos, ls.cycle_cost(P, t, m), q())
     assert cost == ls.descend_nodes(P, other, m, q())
     assert np.array_equal(t, other)
+
+
+@pytest.mark.parametrize("budget", [1, 7, 500])
+def test_local_search_in_slices_reaches_the_same_tour(budget: int) -> None:
+    """Stopped every few clusters and resumed, the local search ends where it does in one go:
+    the clock can be read between slices without changing the answer."""
+    from urpt_gcs.solvers import _lns_kernels as lns
+    from urpt_gcs.solvers import _ls_kernels as ls
+    from urpt_gcs.solvers.heuristic import _prepare
+
+    p = _prepare(cluster_instance(plane_instance(150, 5)), SearchSettings().neighbours)
+    m = p.m
+    order = np.random.default_rng(2).permutation(m)
+    first = p.start[:-1][order].astype(np.int32)
+
+    def scratch() -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        w = (
+            np.full(m, -1, np.int32),
+            np.zeros(m, np.int32),
+            np.zeros(m + 1),
+            np.zeros(m + 1),
+            np.zeros(m, np.int32),
+        )
+        return w, (np.zeros(m, np.int32), np.zeros(m, np.bool_), np.zeros(1, np.int64))
+
+    whole = first.copy()
+    w, q = scratch()
+    moves = ls.SYMMETRIC | ls.TWO_OPT | ls.OR_OPT
+    want = lns.improve(p.kernel_args, whole, m, moves, w, q)
+    sliced = first.copy()
+    w, q = scratch()
+    lns.queue_all(p.kernel_args, sliced, m, w, q)
+    calls = 0
+    while True:
+        calls += 1
+        cost, done = ls.local_search_for(p.kernel_args, sliced, m, moves, w, q, budget)
+        if done:
+            break
+    assert cost == pytest.approx(want) and np.array_equal(sliced, whole)
+    assert cost < 0.5 * ls.cycle_cost(p.kernel_args, first, m)
+    assert calls > 1

@@ -413,10 +413,21 @@ def local_search(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
     queue is empty the node choice for the order is made exact, which may queue more.
     Returns the cost of the tour.
     """
+    return local_search_for(P, t, m, moves, W, Q, -1)[0]
+
+
+@njit(cache=True)
+def local_search_for(P, t, m, moves, W, Q, budget):  # type: ignore[no-untyped-def]
+    """:func:`local_search` that stops after ``budget`` queued clusters (-1: none), so that a
+    caller can read the clock between calls; the tour is whole at every stop. Returns the
+    cost of the tour and whether the search has ended (queue empty, nodes re-chosen)."""
     pos, _, fw, bw, buf = W
     stack, queued, top = Q
     while True:
         while top[0] > 0:
+            if budget == 0:
+                return cycle_cost(P, t, m), False
+            budget -= 1
             top[0] -= 1
             c = stack[top[0]]
             queued[c] = False
@@ -432,4 +443,4 @@ def local_search(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
         cost = cycle_cost(P, t, m)
         new = reopt_nodes(P, t, m, pos, cost, Q)
         if top[0] == 0 or new >= cost - EPS:
-            return new
+            return new, True

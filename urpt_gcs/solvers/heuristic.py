@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Instance
 from urpt_gcs.solvers import _lns_kernels as lns
+from urpt_gcs.solvers import _ls_kernels as ls
 from urpt_gcs.solvers._ls_kernels import EPS, OR_OPT, SYMMETRIC, TWO_OPT
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.clustered import (
@@ -72,6 +73,8 @@ _NODE_RANKED_NODES = 1_000_000
 # (then the cycle programme picks the nodes) instead of random cheapest insertion, whose
 # cost grows with the square of the clusters and which the clock cannot interrupt.
 _CURVE_CLUSTERS = 1000
+# Queued clusters the local search on a curve tour takes between two reads of the clock.
+_IMPROVE_SLICE = 2000
 
 
 @dataclass(frozen=True, slots=True)
@@ -373,7 +376,17 @@ class _Run:
             [np.add.reduceat(p.xy[:, i], p.start[:-1]) / counts for i in range(2)]
         )
         tour = p.start[:-1][_hilbert_order(centre)].astype(np.int32)
-        cost = lns.improve(self.P, tour, self.m, self.moves, self.W, self.Q)
+        lns.queue_all(self.P, tour, self.m, self.W, self.Q)
+        # A slice of the queue at a time, so that the clock is read between slices.
+        while True:
+            cost, done = ls.local_search_for(
+                self.P, tour, self.m, self.moves, self.W, self.Q, _IMPROVE_SLICE
+            )
+            if done or self.out_of_time():
+                break
+        # What is still queued is not this tour's business any more.
+        self.Q[1][:] = False
+        self.Q[2][0] = 0
         return tour, float(cost)
 
     def anneal(self, tour: I32, cost: float, temp: float, restarts: int) -> tuple[I32, float]:
