@@ -72,3 +72,29 @@ def test_lower_bound_optimum_heuristic_order(seed: int) -> None:
     for tour in (exact, heuristic):
         assert inst.uncovered(list(tour.order)) == []
     assert np.all(exact.sees.any(axis=0))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_disjoint_discs_are_the_greedy_choice_pairwise_apart_and_maximal(seed: int) -> None:
+    """The discs the packing bound counts are the ones greedy in index order takes (written
+    out pair by pair here), no two within twice the radius, and no other disc fits."""
+    from urpt_gcs.solvers.base import greedy_disjoint
+
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(0.0, 500.0, (600, 2))
+    radius = 12.0
+    want: list[int] = []
+    for i, c in enumerate(pts):
+        if all(np.hypot(*(c - pts[j])) > 2.0 * radius for j in want):
+            want.append(i)
+    got = greedy_disjoint(pts, radius)
+    assert got == want
+    chosen = pts[got]
+    gaps = np.hypot(*(chosen[:, None, :] - chosen[None, :, :]).transpose(2, 0, 1))
+    np.fill_diagonal(gaps, np.inf)
+    assert gaps.min() > 2.0 * radius
+    others = np.delete(pts, got, axis=0)
+    assert (
+        np.hypot(*(others[:, None, :] - chosen[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+        <= 2 * radius
+    ).all()
