@@ -137,8 +137,9 @@ def probe_workers(client: Client, paths: Sequence[str]) -> dict[str, list[str]]:
     try:
         answers: dict[str, tuple[str, list[str]]] = client.run(_unreadable, list(paths))
     except Exception as exc:  # whatever a worker raised, it cannot run our jobs
+        address = client.scheduler_info().get("address", "?")
         raise ClusterError(
-            f"the workers at {client.scheduler_info().get('address', '?')} cannot run urpt-gcs jobs "
+            f"the workers at {address} cannot run urpt-gcs jobs "
             f"({type(exc).__name__}: {' '.join(str(exc).split())}): install urpt-gcs "
             f"{__version__} in the workers' environment"
         ) from None
