@@ -261,7 +261,6 @@ def _site_jobs(
     out_dir: Path,
 ) -> list[Job]:
     where = f"[[site]] {number}"
-    _known(path, where, site, SITE_KEYS | set(PLAN_KEYS))
     for key in ("name", "dem", "targets"):
         if key not in site:
             raise JobsFileError(f"{path}: {where} has no '{key}': add {key} = \"...\"")
@@ -273,6 +272,7 @@ def _site_jobs(
             "letters, digits, '.', '_' and '-', starting with a letter or digit"
         )
     where = f"[[site]] '{name}'"
+    _known(path, where, site, SITE_KEYS | set(PLAN_KEYS))
     options = {k: v for k, v in site.items() if k in PLAN_KEYS}
     _options(path, where, options)
     in_sweep = f"[site.sweep] of '{name}'"
