@@ -304,3 +304,35 @@ def test_the_readme_jobs_file_reads_as_it_says(tmp_path: Path) -> None:
     assert [j.name for j in jobs] == ["quarry-alt80", "quarry-alt100", "quarry-alt120"]
     assert {j.settings.fov_deg for j in jobs} == {35.0}
     assert jobs[0].dem == str(tmp_path / "quarry" / "dsm.tif")
+
+
+def test_cli_on_a_running_scheduler(tmp_path: Path, client: Client) -> None:
+    points = _kml_targets(DEMO / "targets.kml")[:4]
+    _write(
+        tmp_path / "four.csv",
+        "name,lat,lon\n" + "".join(f"{n},{a:.9f},{o:.9f}\n" for n, a, o in points),
+    )
+    jobs_file = _write(
+        tmp_path / "jobs.toml",
+        f'[plan]\nno-map = true\n[[site]]\nname = "four"\ndem = "{DEMO / "site.tif"}"\n'
+        'targets = "four.csv"\n'
+        f'[[site]]\nname = "none"\ndem = "{DEMO / "site.tif"}"\ntargets = "four.csv"\n'
+        "min-clearance = 500\n",
+    )
+    out = tmp_path / "out"
+    address = client.scheduler_info()["address"]
+    args = ["batch", str(jobs_file), "--out", str(out), "--scheduler", address]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1
+    assert result.stderr.strip().splitlines() == [
+        f"urpt-gcs: error: 1 of 2 jobs failed (none): see {out / 'batch.csv'}"
+    ]
+    assert f"2 jobs on 2 workers at {address}" in result.stdout
+    assert re.search(r"\[\d/2\] four ok, \d+ m, 1 sortie \(\d+\.\d s, on tcp://", result.stdout)
+    assert re.search(r"\[\d/2\] none failed \(.*\): .*clearance", result.stdout)
+    rows = {row["job"]: row for row in csv.DictReader((out / "batch.csv").open())}
+    assert rows["four"]["status"] == "ok" and rows["four"]["targets"] == "4"
+    assert rows["none"]["status"] == "failed" and rows["none"]["tour_length_m"] == ""
+    assert sorted(p.name for p in out.iterdir()) == ["batch.csv", "four"]
+    # The client's view of the cluster stays up: the batch closed only its own client.
+    assert client.submit(abs, -3).result() == 3

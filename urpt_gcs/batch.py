@@ -319,6 +319,11 @@ def _site_jobs(
                 chosen[key] = value
                 suffix += f"-{'alt' if key == 'altitude' else key}{_label(value)}"
         job_name = name + suffix
+        if job_name == RESULTS_FILE:
+            raise JobsFileError(
+                f"{path}: {where}: a job named {RESULTS_FILE} would take the results' name: "
+                "rename the site"
+            )
         try:
             settings = plan_settings(chosen)
         except SettingsError as exc:
