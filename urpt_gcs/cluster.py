@@ -17,6 +17,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -91,8 +93,8 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
 
     with contextlib.ExitStack() as stack:
         if scheduler is None:
-            cluster = stack.enter_context(
-                LocalCluster(
+            with _workers_ignore_ctrl_c():
+                cluster = LocalCluster(
                     n_workers=workers or os.cpu_count() or 1,
                     threads_per_worker=1,
                     processes=True,
@@ -103,7 +105,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                     scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                     silence_logs=logging.ERROR,
                 )
-            )
+            stack.enter_context(cluster)
             client = stack.enter_context(Client(cluster))
         else:
             try:
@@ -122,6 +124,23 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                     f"start some (`dask worker {scheduler}`)"
                 ) from None
         yield client
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start worker processes that ignore SIGINT (an ignored signal stays ignored in a child).
+
+    Ctrl-C at a terminal reaches every process of the group: the workers would each print
+    a traceback, and this process closes them anyway.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def probe_workers(client: Client, paths: Sequence[str]) -> dict[str, list[str]]:
