@@ -8,16 +8,17 @@ A jobs file is TOML::
 
     [cameras.wide]               # optional: named cameras, for a camera sweep
     fov = 40
+    [cameras.narrow]
+    fov = 20
 
     [[site]]
     name = "quarry"              # the job's folder under --out
     dem = "quarry/dsm.tif"       # paths relative to the jobs file
     targets = "quarry/targets.kml"
     fov = 35                     # any `urpt-gcs plan` option, named as its flag
-    [site.sweep]                 # optional: one plan per value (per combination)
-    altitude = [80, 100, 120]    # -> quarry-alt80, quarry-alt100, quarry-alt120
-    camera = ["wide"]            # -> quarry-wide
-    fov = [25, 30]               # -> quarry-fov25, quarry-fov30
+    [site.sweep]                 # optional: one plan per combination of values
+    altitude = [80, 100]         # quarry-alt80-wide, quarry-alt80-narrow, quarry-alt100-wide...
+    camera = ["wide", "narrow"]  # (or fov = [25, 30]: quarry-alt80-fov25, ...)
 
 Each job is planned where it runs (:func:`run_job`: the DEM window is read there) and its
 files are rendered there; this process commits each job's folder ``OUT/NAME`` all or none,
@@ -27,7 +28,6 @@ per job. A job that fails is a row with its one-line error; the others go on.
 
 from __future__ import annotations
 
-import csv
 import difflib
 import itertools
 import math
@@ -619,12 +619,6 @@ def write_results(rows: Sequence[Row], out_dir: Path) -> None:
     commit(
         [(check_folder(out_dir, "--out", names=[RESULTS_FILE]), {RESULTS_FILE: results_csv(rows)})]
     )
-
-
-def read_results(path: Path) -> list[dict[str, str]]:
-    """The rows of a ``batch.csv`` as text."""
-    with path.open(newline="") as fh:
-        return list(csv.DictReader(fh))
 
 
 def summary_table(rows: Sequence[Row]) -> str:
