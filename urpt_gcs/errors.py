@@ -13,6 +13,8 @@ The tree::
     ├── PlanError (RuntimeError)     the inputs are valid but no safe plan exists
     ├── MissionFileError (ValueError) a .plan or .waypoints file cannot be used
     ├── OutputError (OSError)        an output cannot be written
+    ├── JobsFileError (ValueError)   a batch's jobs file cannot be used
+    ├── ClusterError (ConnectionError) the Dask cluster cannot be reached or cannot run the jobs
     └── LinkError (ConnectionError)  the vehicle cannot be reached or refused the mission
         ├── MissionRejected           the vehicle answered MISSION_ACK with a refusal
         └── LinkTimeout               the vehicle stopped answering (in urpt_gcs.link)
@@ -47,6 +49,14 @@ class MissionFileError(UrptError, ValueError):
 
 class OutputError(UrptError, OSError):
     """An output file or folder cannot be written."""
+
+
+class JobsFileError(UrptError, ValueError):
+    """A batch's jobs file is missing, is not TOML, or names a setting or path it cannot use."""
+
+
+class ClusterError(UrptError, ConnectionError):
+    """The Dask scheduler cannot be reached, has no workers, or its workers cannot run jobs."""
 
 
 class LinkError(UrptError, ConnectionError):

@@ -16,19 +16,21 @@ nadir points.
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyproj
 from affine import Affine
 
 from urpt_gcs.bench import rows_csv
+from urpt_gcs.cluster import map_jobs
 from urpt_gcs.gtsp import Covers, Instance, build_instance
 from urpt_gcs.output import write_all
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
@@ -60,7 +62,11 @@ PAPER_PROVEN: dict[tuple[int, float, int], int] = {
     (8, 40.0, 20): 0, (8, 40.0, 30): 0, (8, 40.0, 40): 0,
 }  # fmt: skip
 
+if TYPE_CHECKING:
+    from distributed import Client
+
 Progress = Callable[[str], None]
+Key = tuple[int, int, float, int]  # one instance: terrain, m, fov, d
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,7 +190,7 @@ def run_instance(
     )
 
 
-def study_grid(quick: bool) -> list[tuple[int, int, float, int]]:
+def study_grid(quick: bool) -> list[Key]:
     """(terrain, m, fov, d) of every instance; ``quick`` keeps a small subset for CI."""
     if quick:
         return [(t, m, 30.0, 20) for t in range(2) for m in TARGET_COUNTS]
@@ -195,25 +201,46 @@ def study_grid(quick: bool) -> list[tuple[int, int, float, int]]:
     ]
 
 
+@functools.lru_cache(maxsize=4)
+def _terrain(seed: int) -> Terrain:
+    # Instances of one terrain come in a row: a worker builds each terrain about once.
+    return tin_terrain(seed)
+
+
+def instance_job(key: Key, heuristic_s: float) -> Row:
+    """One study instance, as a job for :func:`urpt_gcs.cluster.map_jobs`."""
+    t, m, fov, d = key
+    return run_instance(t, _terrain(t), m, fov, d, heuristic_s)
+
+
 def run_paper(
     quick: bool = False,
     out_dir: Path | None = None,
     heuristic_s: float = 1.0,
     progress: Progress | None = None,
+    client: Client | None = None,
+    grid: Sequence[Key] | None = None,
 ) -> list[Row]:
-    """Run the study (or its quick subset); write ``out_dir/results.csv`` if given."""
+    """Run the study (or its quick subset); write ``out_dir/results.csv`` if given.
+
+    With a Dask ``client`` (:func:`urpt_gcs.cluster.open_client`) every instance is a task;
+    the rows are the same as run here (every seed is fixed), but for the times. ``grid``
+    replaces the study's instances.
+    """
     say = progress or (lambda _msg: None)
-    rows: list[Row] = []
-    terrains: dict[int, Terrain] = {}
-    grid = study_grid(quick)
-    for k, (t, m, fov, d) in enumerate(grid, start=1):
-        terrain = terrains.setdefault(t, tin_terrain(t))
-        row = run_instance(t, terrain, m, fov, d, heuristic_s)
-        rows.append(row)
+    keys = list(study_grid(quick) if grid is None else grid)
+    ended = 0
+
+    def done(_index: int, row: Row) -> None:
+        nonlocal ended
+        ended += 1
         say(
-            f"[{k}/{len(grid)}] terrain {t} m={m} fov={fov:g} d={d}: optimum "
-            f"{row.optimum:.2f} in {row.exact_s:.2f} s"
+            f"[{ended}/{len(keys)}] terrain {row.terrain} m={row.m} fov={row.fov_deg:g} "
+            f"d={row.d}: optimum {row.optimum:.2f} in {row.exact_s:.2f} s"
         )
+
+    job = functools.partial(instance_job, heuristic_s=heuristic_s)
+    rows = map_jobs(job, keys, client, done)
     if out_dir is not None:
         write_csv(rows, out_dir / "results.csv")
     return rows

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from urpt_gcs.cli._root import fail, main, terminal_progress
 from urpt_gcs.errors import UrptError
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 
 @main.group("bench")
@@ -64,6 +70,37 @@ def bench_gtsplib_command(
     click.echo(format_table(rows))
 
 
+def cluster_options(command: Callable[..., None]) -> Callable[..., None]:
+    """``--scheduler`` and ``--workers``: run a bench's instances on a Dask cluster."""
+    command = click.option(
+        "--workers",
+        type=click.IntRange(min=1),
+        default=None,
+        help="Run on a local Dask cluster of this many worker processes [default: here].",
+    )(command)
+    return click.option(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Run on this Dask scheduler (tcp://host:8786) [default: here].",
+    )(command)
+
+
+@contextlib.contextmanager
+def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client | None]:
+    """No client without --scheduler or --workers (run here), else the cluster's."""
+    if scheduler is not None and workers is not None:
+        raise click.UsageError("--workers sizes a local cluster: not with --scheduler")
+    if scheduler is None and workers is None:
+        yield None
+        return
+    from urpt_gcs.cluster import describe_client, open_client
+
+    with open_client(scheduler, workers) as client:
+        click.echo(f"running on {describe_client(client)}", err=True)
+        yield client
+
+
 @bench_group.command("paper")
 @click.option("--quick", is_flag=True, help="A small subset of the study (what CI runs).")
 @click.option(
@@ -76,17 +113,26 @@ def bench_gtsplib_command(
     show_default=True,
     help="Seconds the heuristic gets per instance.",
 )
-def bench_paper_command(quick: bool, out: Path | None, heuristic_time: float) -> None:
+@cluster_options
+def bench_paper_command(
+    quick: bool,
+    out: Path | None,
+    heuristic_time: float,
+    scheduler: str | None,
+    workers: int | None,
+) -> None:
     """Reproduce the paper's simulation study: 540 instances on random TIN terrains."""
     from urpt_gcs.bench.paper import format_tables, run_paper
 
     try:
-        rows = run_paper(
-            quick=quick,
-            out_dir=out,
-            heuristic_s=heuristic_time,
-            progress=terminal_progress(),
-        )
+        with bench_client(scheduler, workers) as client:
+            rows = run_paper(
+                quick=quick,
+                out_dir=out,
+                heuristic_s=heuristic_time,
+                progress=terminal_progress(),
+                client=client,
+            )
     except UrptError as exc:
         fail(exc)
         return
