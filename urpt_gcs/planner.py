@@ -507,13 +507,14 @@ def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _S
     """Read the targets and the DEM's description; place them in the planning CRS."""
     targets = read_targets(targets_path)
     # Every target offers its nadir and a viewpoint per azimuth, each seeing at least its own
-    # target: refuse, before any work, a target count whose instance could not fit.
+    # target, and the tour records which targets each stop sees (a stop per target at most):
+    # refuse, before any work, a target count whose instance and tour could not fit.
     m = len(targets.targets)
     n = m * (settings.samples + 1)
     require_memory(
-        instance_bytes(n, n),
+        instance_bytes(n, n) + float(m) * float(m),
         f"{m} targets in {targets.source!r} at --samples {settings.samples}: "
-        f"{n} viewpoints and their cover sets",
+        f"{n} viewpoints, their cover sets and the tour's stop-by-target table",
         "plan fewer targets at a time (split the file) or use fewer --samples",
     )
     info = open_dem(dem_path, settings.band)
