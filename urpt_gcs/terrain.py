@@ -36,6 +36,7 @@ import rasterio.io
 import rasterio.warp
 import rasterio.windows
 from affine import Affine
+from numba import njit
 from pyproj.aoi import AreaOfInterest
 from pyproj.database import query_utm_crs_info
 
@@ -926,7 +927,7 @@ def sample_points(info: DemInfo, crs: pyproj.CRS, xy: FloatArray) -> FloatArray:
                 window = rasterio.windows.Window(c0, r0, c1 - c0, r1 - r0)
                 band = src.read(info.band, window=window, masked=True)
                 z = _clean(np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m)
-                out[k] = _bilinear(z, cols[k] - c0 - 0.5, rows[k] - r0 - 0.5)
+                out[k] = bilinear_at(z, cols[k] - c0 - 0.5, rows[k] - r0 - 0.5)
     except rasterio.errors.RasterioError as exc:
         raise DemError(
             f"DEM '{info.path}' could not be read ({_first_line(exc)}): "
@@ -935,10 +936,12 @@ def sample_points(info: DemInfo, crs: pyproj.CRS, xy: FloatArray) -> FloatArray:
     return out
 
 
-def _bilinear(z: FloatArray, col: float, row: float) -> float:
+@njit(cache=True, nogil=True)
+def bilinear_at(z, col, row):  # type: ignore[no-untyped-def]
     """The surface at fractional (col, row) of ``z`` (pixel centres at whole numbers), as
-    :meth:`Terrain.sample` gives it: the edge value beyond the outermost centres, NaN when any
-    of the four corners is nodata."""
+    :meth:`Terrain.sample` gives it: the edge value beyond the outermost centres, NaN outside
+    the grid or when any of the four corners is nodata. Compiled, for kernels and single
+    points alike."""
     rows, cols = z.shape
     if not (-0.5 <= col <= cols - 0.5 and -0.5 <= row <= rows - 0.5):
         return math.nan
@@ -950,4 +953,4 @@ def _bilinear(z: FloatArray, col: float, row: float) -> float:
     fc, fr = col - c0, row - r0
     top = z[r0, c0] * (1.0 - fc) + z[r0, c1] * fc
     bottom = z[r1, c0] * (1.0 - fc) + z[r1, c1] * fc
-    return float(top * (1.0 - fr) + bottom * fr)
+    return top * (1.0 - fr) + bottom * fr

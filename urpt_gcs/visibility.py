@@ -30,7 +30,7 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.segments import clear_of_terrain, resolve_workers
-from urpt_gcs.terrain import FloatArray, Terrain
+from urpt_gcs.terrain import FloatArray, Terrain, bilinear_at
 
 BoolArray = npt.NDArray[np.bool_]
 
@@ -97,30 +97,10 @@ def azimuths(samples: int) -> FloatArray:
 
 
 @njit(cache=True)
-def _bilinear(z, col, row):  # type: ignore[no-untyped-def]
-    """The surface at fractional (col, row), centres at whole numbers, exactly as
-    :meth:`urpt_gcs.terrain.Terrain.sample`: NaN outside the grid or next to nodata."""
-    rows, cols = z.shape
-    if not (-0.5 <= col <= cols - 0.5 and -0.5 <= row <= rows - 0.5):
-        return np.nan
-    col = min(max(col, 0.0), cols - 1.0)
-    row = min(max(row, 0.0), rows - 1.0)
-    c0 = min(math.floor(col), max(cols - 2, 0))
-    r0 = min(math.floor(row), max(rows - 2, 0))
-    c1 = min(c0 + 1, cols - 1)
-    r1 = min(r0 + 1, rows - 1)
-    fc = col - c0
-    fr = row - r0
-    top = z[r0, c0] * (1.0 - fc) + z[r0, c1] * fc
-    bottom = z[r1, c0] * (1.0 - fc) + z[r1, c1] * fc
-    return top * (1.0 - fr) + bottom * fr
-
-
-@njit(cache=True)
 def _limit(z, col0, row0, dcol, drow, s, ground, height):  # type: ignore[no-untyped-def]
     """The farthest plane distance the terrain sample at ``s`` allows (``s`` itself over
     unknown ground, ``inf`` when the sample is below the target)."""
-    value = _bilinear(z, col0 + dcol * s, row0 + drow * s)
+    value = bilinear_at(z, col0 + dcol * s, row0 + drow * s)
     if math.isnan(value):
         return s
     slope = (value - ground) / s
