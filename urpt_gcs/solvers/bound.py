@@ -462,6 +462,7 @@ def lower_bound(
     upper: float,
     time_limit_s: float,
     gap_target: float = 1e-4,
+    method: str = "auto",
 ) -> Bound:
     """A lower bound of every closed tour (through the depot, if any) entering every region.
 
@@ -476,6 +477,9 @@ def lower_bound(
         Seconds to spend refining pieces; the first round always completes.
     gap_target
         Stop once ``(upper - bound) / bound`` is at most this.
+    method
+        ``exact`` or ``lagrangian`` for the relaxed problem; ``auto``: exact for a few
+        regions, else the Lagrangian and the exact optimum over a subset far apart.
     """
     started = time.perf_counter()
     pieces, boundary = start_pieces(regions)
@@ -487,6 +491,7 @@ def lower_bound(
     if m <= 1:
         return Bound(0.0, "single region", 0, pieces.n, 0.0)
     exact = m - 1 <= EXACT_MAX_REGIONS and _exact_work(pieces, m) <= _EXACT_WORK
+    exact = method == "exact" or (exact and method == "auto")
     mu = np.zeros(pieces.n)
     best = 0.0
     rounds = 0
@@ -514,4 +519,45 @@ def lower_bound(
         # A half keeps its parent's multiplier: the bound at the old multipliers can only rise.
         mu = np.ascontiguousarray(mu[parent])
     method = "exact" if exact else "lagrangian"
+    if method == "auto" and not exact:
+        left = time_limit_s - (time.perf_counter() - started)
+        sub = subset_bound(regions, upper, max(left, 0.0), gap_target)
+        if sub.value > best:
+            best, method = sub.value, f"subset of {EXACT_MAX_REGIONS}"
+        rounds += sub.rounds
     return Bound(min(best, upper), method, rounds, pieces.n, time.perf_counter() - started)
+
+
+def spread_subset(regions: RegionSet, k: int) -> list[int]:
+    """``k`` regions far apart (farthest-point order by the distance between enclosing
+    discs), starting from the one farthest from the depot (or from region 0)."""
+    cx, cy, cr = _star_discs(regions)
+    skip = skipped_regions(regions)
+    if regions.depot_xy is not None:
+        gap = np.hypot(cx - regions.depot_xy[0], cy - regions.depot_xy[1]) - cr
+    else:
+        gap = np.hypot(cx - cx[0], cy - cy[0]) - cr - cr[0]
+    gap = np.where(skip, -np.inf, gap)
+    chosen: list[int] = []
+    for _ in range(min(k, int(np.count_nonzero(~skip)))):
+        j = int(np.argmax(gap))
+        chosen.append(j)
+        d = np.hypot(cx - cx[j], cy - cy[j]) - cr - cr[j]
+        gap = np.minimum(gap, d)
+        gap[chosen] = -np.inf
+    return chosen
+
+
+def subset_bound(
+    regions: RegionSet, upper: float, time_limit_s: float, gap_target: float = 1e-4
+) -> Bound:
+    """The relaxed optimum over a few regions far apart: every tour enters those too."""
+    chosen = spread_subset(regions, EXACT_MAX_REGIONS)
+    sub = RegionSet(
+        discs=None if regions.discs is None else regions.discs[chosen],
+        polygons=None if regions.polygons is None else tuple(regions.polygons[i] for i in chosen),
+        depot_xy=regions.depot_xy,
+        outer=tuple(regions.outer[i] for i in chosen),
+        depot_inside=tuple(False for _ in chosen),
+    )
+    return lower_bound(sub, upper, time_limit_s, gap_target)
