@@ -162,7 +162,10 @@ def _pieces(rows: list[Row]) -> Pieces:
 
 
 def split(
-    pieces: Pieces, chosen: npt.NDArray[np.bool_], stars: list[OuterStar], boundary: bool
+    pieces: Pieces,
+    chosen: npt.NDArray[np.bool_],
+    stars: list[OuterStar | None],
+    boundary: bool,
 ) -> tuple[Pieces, I64]:
     """Split each chosen piece in two across its longer side (arc length or band depth); the
     halves take their star's reach over their own angles, and empty halves are left out.

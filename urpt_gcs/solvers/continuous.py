@@ -101,7 +101,9 @@ def _near_samples(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatAr
     out = []
     r = d[:, 2] * (1.0 - 1e-9)
     for da in _NEAR_ANGLES:
-        out.append(np.column_stack([d[:, 0] + r * np.cos(theta + da), d[:, 1] + r * np.sin(theta + da)]))
+        out.append(
+            np.column_stack([d[:, 0] + r * np.cos(theta + da), d[:, 1] + r * np.sin(theta + da)])
+        )
     return np.vstack(out)
 
 
@@ -176,4 +178,6 @@ def solve_regions(
 
 
 def _share(settings: SolveSettings, seconds: float, seed_offset: int = 0) -> SolveSettings:
-    return SolveSettings(time_limit_s=max(seconds, 0.05), seed=(settings.seed + seed_offset) % 2**32)
+    return SolveSettings(
+        time_limit_s=max(seconds, 0.05), seed=(settings.seed + seed_offset) % 2**32
+    )

@@ -164,7 +164,8 @@ def _best_in_polygon(
         j = int(cost(trial).argmin())
         lo, hi = trial[max(j - 1, 0)], trial[min(j + 1, 4)]
     s = np.asarray([0.5 * (lo + hi)])
-    return shapely.get_coordinates(shapely.line_interpolate_point(ring, s % length))[0]
+    out: FloatArray = shapely.get_coordinates(shapely.line_interpolate_point(ring, s % length))[0]
+    return out
 
 
 def refine_touches(
@@ -213,7 +214,8 @@ def refine_touches(
             old = float(np.hypot(*(pts[k] - a)) + np.hypot(*(pts[k] - b)))
             if regions.discs is not None:
                 cx, cy, r = regions.discs[idx[k]]
-                p = np.asarray(best_on_disc(*a, *b, cx, cy, r * (1.0 - 1e-9)))
+                px, py = best_on_disc(a[0], a[1], b[0], b[1], cx, cy, r * (1.0 - 1e-9))
+                p = np.asarray([px, py], dtype=np.float64)
             else:
                 assert regions.polygons is not None
                 p = _best_in_polygon(regions.polygons[idx[k]], a, b, pts[k])

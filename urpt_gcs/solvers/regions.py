@@ -53,8 +53,8 @@ class OuterStar:
 
     def _sectors(self, theta0: float, theta1: float) -> slice:
         n = self.reach_m.size
-        k0 = int(math.floor(theta0 / (2.0 * math.pi) * n + 1e-9))
-        k1 = int(math.ceil(theta1 / (2.0 * math.pi) * n - 1e-9))
+        k0 = math.floor(theta0 / (2.0 * math.pi) * n + 1e-9)
+        k1 = math.ceil(theta1 / (2.0 * math.pi) * n - 1e-9)
         k0 = min(max(k0, 0), n - 1)
         return slice(k0, min(max(k1, k0 + 1), n))
 
