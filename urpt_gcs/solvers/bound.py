@@ -513,7 +513,9 @@ def lower_bound(
         rounds += 1
         best = max(best, value)
         spent = time.perf_counter() - started
-        if upper - best <= gap_target * best or spent >= time_limit_s or not used.any():
+        # Without the exact optimum, half the time is kept for the subset bound.
+        own_limit = time_limit_s if exact or method != "auto" else 0.5 * time_limit_s
+        if upper - best <= gap_target * best or spent >= own_limit or not used.any():
             break
         finer, parent = split(pieces, used, stars, boundary)
         if finer.n == pieces.n or (exact and _exact_work(finer, m) > _EXACT_WORK):
