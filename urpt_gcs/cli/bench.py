@@ -101,6 +101,38 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
         yield client
 
 
+@bench_group.command("cetsp")
+@click.argument("directory", type=click.Path(path_type=Path))
+@click.option(
+    "--time-limit", type=float, default=60.0, show_default=True, help="Seconds per instance."
+)
+@click.option("--only", default=None, metavar="NAME[,NAME]", help="Run only these instances.")
+@click.option(
+    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the search.")
+def bench_cetsp_command(
+    directory: Path, time_limit: float, only: str | None, out: Path | None, seed: int
+) -> None:
+    """Solve and bound the CETSP instances in DIRECTORY (laid out like bench/cetsp)."""
+    from urpt_gcs.bench.cetsp import format_table, run_cetsp
+
+    names = [part.strip() for part in (only or "").split(",") if part.strip()]
+    try:
+        rows = run_cetsp(
+            directory,
+            time_limit_s=time_limit,
+            only=names or None,
+            out_dir=out,
+            progress=terminal_progress(),
+            seed=seed,
+        )
+    except UrptError as exc:
+        fail(exc)
+        return
+    click.echo(format_table(rows))
+
+
 @bench_group.command("paper")
 @click.option("--quick", is_flag=True, help="A small subset of the study (what CI runs).")
 @click.option(

@@ -1,0 +1,123 @@
+"""The certified lower bound: never above a brute-force tour or a proven optimum."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+
+import numpy as np
+import pytest
+from conftest import CETSP, needs_shared
+from shapely.geometry import Polygon
+
+from urpt_gcs.bench.cetsp import read_instance
+from urpt_gcs.solvers.bound import lower_bound, skipped_regions, start_pieces
+from urpt_gcs.solvers.regions import RegionSet
+
+
+def _disc_grid(x: float, y: float, r: float, k: int) -> np.ndarray:
+    """Points of a fine grid inside a disc, and on its rim."""
+    g = np.linspace(-r, r, k)
+    gx, gy = np.meshgrid(g, g)
+    inside = gx**2 + gy**2 <= r * r
+    a = np.linspace(0.0, 2.0 * np.pi, 4 * k, endpoint=False)
+    rim = np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])
+    return np.vstack([np.column_stack([x + gx[inside], y + gy[inside]]), rim])
+
+
+def _brute_force(sets: list[np.ndarray], depot: tuple[float, float] | None) -> float:
+    """The shortest closed tour through one point of each set, over every order (a real
+    tour, so it is at least the continuous optimum)."""
+    best = np.inf
+    n = len(sets)
+    first = [np.asarray(depot)[None, :]] if depot is not None else []
+    orders = (
+        itertools.permutations(range(n))
+        if depot
+        else ((0, *p) for p in itertools.permutations(range(1, n)))
+    )
+    for perm in orders:
+        seq = first + [sets[i] for i in perm]
+        for start in range(len(seq[0])):
+            cur = np.zeros(1)
+            prev = seq[0][start : start + 1]
+            for nxt in seq[1:]:
+                d = np.hypot(prev[:, None, 0] - nxt[None, :, 0], prev[:, None, 1] - nxt[None, :, 1])
+                cur = (cur[:, None] + d).min(axis=0)
+                prev = nxt
+            close = np.hypot(*(prev - seq[0][start]).T)
+            best = min(best, float((cur + close).min()))
+            if depot is not None:
+                break
+    return best
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("method", ["exact", "lagrangian"])
+def test_bound_never_above_a_brute_force_tour(seed: int, method: str) -> None:
+    rng = np.random.default_rng(seed)
+    n = 4
+    discs = np.column_stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), rng.uniform(0.5, 3, n)])
+    depot = (10.0, 10.0) if seed % 2 == 0 else None
+    regions = RegionSet(discs=discs, depot_xy=depot)
+    # Without a depot every point of the first disc is a start: a coarser grid.
+    brute = _brute_force([_disc_grid(*d, 25 if depot else 9) for d in discs], depot)
+    bound = lower_bound(regions, upper=brute * 2.0, time_limit_s=0.5, method=method)
+    assert bound.value <= brute * (1.0 + 1e-9)
+    # Not a trivial bound either: the relaxation is close to the optimum on so few discs.
+    assert bound.value >= (0.95 if method == "exact" else 0.6) * brute
+
+
+def test_polygon_bound_never_above_a_brute_force_tour() -> None:
+    rng = np.random.default_rng(7)
+    polys = []
+    for cx, cy in rng.uniform(0, 30, (4, 2)):
+        a = np.sort(rng.uniform(0, 2 * np.pi, 7))
+        r = rng.uniform(1.0, 4.0, 7)
+        polys.append(Polygon(np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a)])))
+    regions = RegionSet(polygons=tuple(polys), depot_xy=(15.0, 15.0))
+    sets = []
+    for p in polys:
+        x0, y0, x1, y1 = p.bounds
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 30), np.linspace(y0, y1, 30))
+        pts = np.column_stack([gx.ravel(), gy.ravel()])
+        own = np.zeros(len(pts), dtype=np.int64) + polys.index(p)
+        sets.append(pts[regions.contains(pts, own)])
+    brute = _brute_force(sets, regions.depot_xy)
+    bound = lower_bound(regions, upper=brute * 2.0, time_limit_s=0.5)
+    assert 0.8 * brute <= bound.value <= brute * (1.0 + 1e-9)
+
+
+def test_pieces_cover_the_outer_stars() -> None:
+    rng = np.random.default_rng(3)
+    discs = np.column_stack([rng.uniform(0, 50, 6), rng.uniform(0, 50, 6), rng.uniform(1, 5, 6)])
+    regions = RegionSet(discs=discs, depot_xy=(25.0, 25.0))
+    pieces, boundary = start_pieces(regions)
+    assert boundary  # with a depot, the tour meets every rim
+    kept = np.flatnonzero(~skipped_regions(regions))
+    assert np.array_equal(np.unique(pieces.region), np.arange(len(kept) + 1))
+    for i, (_x, _y, r) in enumerate(discs[kept]):
+        a = rng.uniform(0, 2 * np.pi, 200)
+        own = pieces.region == i
+        # Every rim point lies in some piece of its disc.
+        t = np.mod(a, 2 * np.pi)
+        hit = (t[:, None] >= pieces.t0[own]) & (t[:, None] <= pieces.t1[own])
+        hit &= (pieces.r0[own] <= r + 1e-9) & (pieces.r1[own] >= r - 1e-9)
+        assert hit.any(axis=1).all()
+
+
+def _proven() -> list[tuple[str, float]]:
+    if not (CETSP / "best_known.csv").is_file():
+        return []
+    with (CETSP / "best_known.csv").open(encoding="utf-8", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["proven_optimal"] == "yes"]
+    return [(r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= 50]
+
+
+@needs_shared("bench/cetsp")
+@pytest.mark.parametrize(("name", "optimum"), _proven())
+def test_bound_never_above_a_proven_cetsp_optimum(name: str, optimum: float) -> None:
+    regions = read_instance(CETSP / "instances" / f"{name}.txt")
+    bound = lower_bound(regions, upper=optimum * 1.001, time_limit_s=0.05)
+    # B&B optima are proven to a relative tolerance of 1e-4.
+    assert 0.0 < bound.value <= optimum * (1.0 + 1e-4)

@@ -1,0 +1,183 @@
+"""The continuous problem from regions alone: discretise, solve, refine, bound.
+
+``solve_regions`` takes discs or polygons (and a depot) with no terrain, and returns the
+shortest tour it finds that enters every region together with a certified lower bound for
+*every* such tour, not only those through its candidate points:
+
+1. discretise: candidate points on every region's boundary (and one inside), each covering
+   every region it lies in -- a generalized TSP (:class:`urpt_gcs.gtsp.Instance`);
+2. solve it with the GTSP solvers (:mod:`urpt_gcs.solvers`);
+3. refine the tour continuously with the order fixed (:mod:`urpt_gcs.solvers.refine`), then
+   solve again with the refined points among the candidates, and refine again;
+4. bound it (:mod:`urpt_gcs.solvers.bound`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from urpt_gcs.errors import PlanError
+from urpt_gcs.gtsp import Instance, IntArray
+from urpt_gcs.solvers import solve
+from urpt_gcs.solvers.base import SolveSettings, Tour
+from urpt_gcs.solvers.bound import Bound, lower_bound
+from urpt_gcs.solvers.refine import closed_length, refine_touches
+from urpt_gcs.solvers.regions import RegionSet
+from urpt_gcs.terrain import FloatArray
+
+# Boundary samples per region.
+SAMPLES = 24
+# Fraction of the time limit for the bound; the rest goes to solving and re-solving.
+_BOUND_SHARE = 0.3
+# Re-solves after the first solve.
+_ROUNDS = 3
+# Extra candidates around each refined point: angles either side, in radians.
+_NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
+
+
+@dataclass(frozen=True, slots=True)
+class ContinuousTour:
+    """A tour entering every region, and how far at most it is from the shortest such tour.
+
+    ``points_xy`` are the stops in order (from the depot and back, if there is one);
+    ``touch_region[k]`` and ``touch_xy[k]`` say where the tour enters each region, in order.
+    ``discrete_length`` is the best tour over the candidate points before refinement, and
+    ``lower_bound`` is certified for every tour of the continuous problem.
+    """
+
+    points_xy: FloatArray
+    touch_region: IntArray
+    touch_xy: FloatArray
+    length: float
+    discrete_length: float
+    lower_bound: float
+    bound: Bound
+    solver: str
+    optimal_over_candidates: bool
+    solve_s: float
+
+    @property
+    def gap(self) -> float:
+        """``(length - lower_bound) / lower_bound``; infinite without a positive bound."""
+        if self.lower_bound <= 0.0:
+            return 0.0 if self.length <= 0.0 else math.inf
+        return max(self.length - self.lower_bound, 0.0) / self.lower_bound
+
+
+def touches(instance: Instance, tour: Tour) -> tuple[IntArray, FloatArray]:
+    """The touches of a discrete tour: each region at the first stop that covers it."""
+    assert tour.points_xy is not None
+    seen = np.zeros(instance.n_targets, dtype=bool)
+    seq: list[int] = []
+    pts: list[FloatArray] = []
+    for k in range(len(tour.order)):
+        fresh = np.flatnonzero(tour.sees[k] & ~seen)
+        seen[fresh] = True
+        seq.extend(int(t) for t in fresh)
+        pts.extend(tour.points_xy[k] for _ in fresh)
+    return np.asarray(seq, dtype=np.int64), np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+
+
+def stops(points_xy: FloatArray) -> FloatArray:
+    """The touch points with consecutive repeats merged."""
+    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    if len(pts) < 2:
+        return pts
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-12
+    return pts[keep]
+
+
+def _near_samples(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
+    """Candidates on each disc's rim just either side of where the tour enters it."""
+    if regions.discs is None or len(seq) == 0:
+        return np.zeros((0, 2))
+    d = regions.discs[seq]
+    theta = np.arctan2(pts[:, 1] - d[:, 1], pts[:, 0] - d[:, 0])
+    out = []
+    r = d[:, 2] * (1.0 - 1e-9)
+    for da in _NEAR_ANGLES:
+        out.append(
+            np.column_stack([d[:, 0] + r * np.cos(theta + da), d[:, 1] + r * np.sin(theta + da)])
+        )
+    return np.vstack(out)
+
+
+def solve_regions(
+    regions: RegionSet,
+    settings: SolveSettings | None = None,
+    solver: str = "auto",
+    samples: int = SAMPLES,
+    gap_target: float = 1e-4,
+) -> ContinuousTour:
+    """The shortest tour found that enters every region, with a certified lower bound.
+
+    Parameters
+    ----------
+    regions
+        Discs or polygons, and the depot if tours start and end there.
+    settings
+        Time limit (for the whole: solve, re-solves and bound) and seed.
+    solver
+        The GTSP solver for the candidate points (see :func:`urpt_gcs.solvers.solve`).
+    samples
+        Boundary candidates per region.
+    gap_target
+        The bound stops refining its pieces once the gap is below this.
+
+    Returns
+    -------
+    ContinuousTour
+        The tour, its length before and after refinement, and the bound.
+    """
+    settings = settings or SolveSettings()
+    started = time.perf_counter()
+    solve_budget = settings.time_limit_s * (1.0 - _BOUND_SHARE)
+    base_xy, _ = regions.samples(samples)
+    instance = regions.instance(base_xy)
+    first = solve(instance, solver, _share(settings, solve_budget / (_ROUNDS + 1)))
+    discrete = first.length
+    seq, pts = touches(instance, first)
+    pts = refine_touches(regions, seq, pts)
+    best_len = closed_length(pts, regions.depot_xy)
+    best_seq, best_pts = seq, pts
+    for round_ in range(_ROUNDS):
+        left = solve_budget - (time.perf_counter() - started)
+        if left <= 0.05:
+            break
+        extra = np.vstack([best_pts, _near_samples(regions, best_seq, best_pts)])
+        inst = regions.instance(np.vstack([base_xy, extra]))
+        rounds_left = _ROUNDS - round_
+        tour = solve(inst, solver, _share(settings, left / rounds_left, seed_offset=round_ + 1))
+        seq, pts = touches(inst, tour)
+        pts = refine_touches(regions, seq, pts)
+        length = closed_length(pts, regions.depot_xy)
+        if length < best_len:
+            best_len, best_seq, best_pts = length, seq, pts
+    inside = regions.contains(best_pts, best_seq)
+    if not inside.all() or np.unique(best_seq).size != regions.n:
+        raise PlanError("internal check failed: a refined tour left a region; report this")
+    left = max(settings.time_limit_s - (time.perf_counter() - started), 0.05)
+    bound = lower_bound(regions, best_len, left, gap_target)
+    return ContinuousTour(
+        points_xy=stops(best_pts),
+        touch_region=best_seq,
+        touch_xy=best_pts,
+        length=best_len,
+        discrete_length=discrete,
+        lower_bound=bound.value,
+        bound=bound,
+        solver=first.solver,
+        optimal_over_candidates=first.proven_optimal,
+        solve_s=time.perf_counter() - started,
+    )
+
+
+def _share(settings: SolveSettings, seconds: float, seed_offset: int = 0) -> SolveSettings:
+    return SolveSettings(
+        time_limit_s=max(seconds, 0.05), seed=(settings.seed + seed_offset) % 2**32
+    )
