@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 from collections.abc import Iterator
 from dataclasses import asdict
@@ -336,3 +337,29 @@ def test_cli_on_a_running_scheduler(tmp_path: Path, client: Client) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["batch.csv", "four"]
     # The client's view of the cluster stays up: the batch closed only its own client.
     assert client.submit(abs, -3).result() == 3
+
+
+def test_cetsp_bench_on_the_cluster_equals_the_serial_run(tmp_path: Path, client: Client) -> None:
+    from urpt_gcs.bench.cetsp import run_cetsp
+
+    (tmp_path / "instances").mkdir()
+    discs = {
+        "square": "10 0 1\n10 10 1\n0 10 1\n",
+        "line": "5 0 1.5\n12 1 1\n20 -1 2\n27 0 1\n",
+        "ring": "".join(f"{8 * math.cos(a):.3f} {8 * math.sin(a):.3f} 1.2\n" for a in range(6)),
+    }
+    for name, text in discs.items():
+        (tmp_path / "instances" / f"{name}.txt").write_text(f"# {name} depot=0,0\n{text}")
+    serial = run_cetsp(tmp_path, time_limit_s=1.0)
+    clustered = run_cetsp(tmp_path, time_limit_s=1.0, client=client)
+
+    # The tours are the same; the bound refines its pieces until the clock runs out, so how
+    # far it rises depends on the machine, but it bounds the tour either way.
+    timed = ("time_s", "lower_bound", "gap_pct")
+
+    def fixed(row: object) -> dict[str, object]:
+        return {k: v for k, v in asdict(row).items() if k not in timed}  # type: ignore[call-overload]
+
+    assert [fixed(r) for r in serial] == [fixed(r) for r in clustered]
+    assert all(0.0 < r.lower_bound <= r.length for r in [*serial, *clustered])
+    assert sorted(r.instance for r in clustered) == sorted(discs)

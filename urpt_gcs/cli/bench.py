@@ -111,22 +111,31 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
     "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the search.")
+@cluster_options
 def bench_cetsp_command(
-    directory: Path, time_limit: float, only: str | None, out: Path | None, seed: int
+    directory: Path,
+    time_limit: float,
+    only: str | None,
+    out: Path | None,
+    seed: int,
+    scheduler: str | None,
+    workers: int | None,
 ) -> None:
     """Solve and bound the CETSP instances in DIRECTORY (laid out like bench/cetsp)."""
     from urpt_gcs.bench.cetsp import format_table, run_cetsp
 
     names = [part.strip() for part in (only or "").split(",") if part.strip()]
     try:
-        rows = run_cetsp(
-            directory,
-            time_limit_s=time_limit,
-            only=names or None,
-            out_dir=out,
-            progress=terminal_progress(),
-            seed=seed,
-        )
+        with bench_client(scheduler, workers) as client:
+            rows = run_cetsp(
+                directory,
+                time_limit_s=time_limit,
+                only=names or None,
+                out_dir=out,
+                progress=terminal_progress(),
+                seed=seed,
+                client=client,
+            )
     except UrptError as exc:
         fail(exc)
         return
