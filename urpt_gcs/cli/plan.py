@@ -9,12 +9,13 @@ from pathlib import Path
 import click
 
 from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
-from urpt_gcs.errors import UrptError
+from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.link import DEFAULT_URL
 from urpt_gcs.mission import FIRMWARES, MissionSettings
 from urpt_gcs.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
+from urpt_gcs.visibility import CAMERAS, DEFAULT_HEADINGS, frame_from_flags
 
 
 @main.command("plan")
@@ -39,9 +40,30 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
     "--fov",
     "fov",
     type=float,
-    default=30.0,
+    default=None,
+    help="Camera half-angle from nadir, degrees: a cone camera [default: 30].",
+)
+@click.option(
+    "--camera",
+    "camera",
+    default=None,
+    help="A frame camera by name: " + ", ".join(sorted(CAMERAS)) + ".",
+)
+@click.option("--sensor", default=None, help="Frame camera's sensor, WIDTHxHEIGHT mm.")
+@click.option("--focal", type=float, default=None, help="Frame camera's focal length, mm.")
+@click.option("--image", default=None, help="Frame camera's image, WIDTHxHEIGHT px.")
+@click.option(
+    "--headings",
+    type=int,
+    default=DEFAULT_HEADINGS,
     show_default=True,
-    help="Camera half-angle from nadir, degrees.",
+    help="Headings over 0-180 deg each viewpoint is offered at (frame camera).",
+)
+@click.option(
+    "--gsd",
+    type=float,
+    default=None,
+    help="Ground resolution every photo must reach at its targets, cm/px (frame camera).",
 )
 @click.option(
     "--samples",
@@ -154,7 +176,13 @@ def plan_command(
     band: int | None,
     workers: int | None,
     out: str,
-    fov: float,
+    fov: float | None,
+    camera: str | None,
+    sensor: str | None,
+    focal: float | None,
+    image: str | None,
+    headings: int,
+    gsd: float | None,
     samples: int,
     altitude: float | None,
     clearance: float,
@@ -189,8 +217,17 @@ def plan_command(
         export = None
         if export_gtsp is not None:
             export = check_extra(export_gtsp, "--export-gtsp", destination)
+        frame = frame_from_flags(camera, sensor, focal, image)
+        if frame is not None and fov is not None:
+            raise SettingsError(
+                "--fov is the cone camera's half-angle and --camera/--sensor a frame camera: "
+                "give one"
+            )
         settings = PlanSettings(
-            fov_deg=fov,
+            fov_deg=30.0 if fov is None else fov,
+            frame=frame,
+            gsd_cm=gsd,
+            headings=headings,
             samples=samples,
             altitude_m=altitude,
             clearance_m=clearance,
