@@ -190,6 +190,24 @@ def waypoint_positions(mission: Mission) -> list[tuple[float, float]]:
     ]
 
 
+def photo_headings(mission: Mission) -> list[float] | None:
+    """The heading (true north, degrees) the mission turns the vehicle to for each
+    NAV_WAYPOINT, in flight order: the CONDITION_YAW before it (ArduPilot) or its own yaw
+    (PX4). None when the mission turns it for none of them (a cone camera's mission)."""
+    headings: list[float] = []
+    pending = math.nan
+    for item in mission.items:
+        if item.command == mavlink.MAV_CMD_CONDITION_YAW and item.params[3] == 0:
+            pending = item.params[0] % 360.0
+        elif item.command == mavlink.MAV_CMD_NAV_WAYPOINT:
+            yaw = item.params[3] if mission.firmware == "px4" else math.nan
+            headings.append(yaw % 360.0 if math.isfinite(yaw) else pending)
+            pending = math.nan
+    if all(math.isnan(h) for h in headings):
+        return None
+    return headings
+
+
 def _item(command: int, frame: int, *params: float) -> MissionItem:
     padded = tuple(float(p) for p in params) + (0.0,) * (7 - len(params))
     return MissionItem(command=command, frame=frame, params=padded)  # type: ignore[arg-type]
