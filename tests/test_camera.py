@@ -17,6 +17,7 @@ from independent import FrameCamera, check_mission, load_raster, read_waypoints_
 from pymavlink import mavutil
 from test_plan import _kml_targets, _valid_targets
 
+from urpt_gcs.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.cli import main
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.mission import (
@@ -31,7 +32,7 @@ from urpt_gcs.products import write_products
 from urpt_gcs.readback import WireItem, compare, wire_items
 from urpt_gcs.sitl.store import Item, ardupilot_stored
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.visibility import CAMERAS, Camera, Frame, frame_from_flags
+from urpt_gcs.visibility import Camera
 
 MAV = mavutil.mavlink
 FAST = SolveSettings(time_limit_s=1.0)
@@ -41,11 +42,11 @@ P4RTK = FrameCamera(13.2, 8.8, 8.8, 5472, 3648)
 
 def test_presets_match_the_makers_ground_resolution() -> None:
     """DJI states the Phantom 4 RTK's GSD as H/36.5 cm (H in metres), within 1 %; the
-    Mavic 3 Enterprise's pixel is its 17.3 mm sensor over 5280 px."""
+    Mavic 3 Enterprise's pixel counts by its coarser side, 13.0 mm over 3956 px."""
     p4 = CAMERAS["phantom4rtk"].frame
     m3e = CAMERAS["mavic3e"].frame
     assert float(p4.gsd_cm(100.0)) == pytest.approx(100.0 / 36.5, rel=0.01)
-    assert float(m3e.gsd_cm(100.0)) == pytest.approx(100.0 * 17.3 / 5280 / 12.29 * 100.0)
+    assert float(m3e.gsd_cm(100.0)) == pytest.approx(100.0 * 13.0 / 3956 / 12.29 * 100.0)
     # The lens's 84 degree field of view is the frame's diagonal.
     for frame in (p4, m3e):
         assert 2.0 * math.degrees(math.atan(frame.diagonal_tan)) == pytest.approx(84.0, abs=1.5)
@@ -254,3 +255,59 @@ def test_real_rasters_every_target_inside_the_turned_frame(tmp_path: Path, name:
     )
     _, _, problems = _framed_plan_checked(dem, csv, targets, tmp_path / "out", settings)
     assert problems == []
+
+
+def _framed_demo_plan(out: Path) -> Path:
+    args = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
+    args += ["--out", str(out), "--camera", "phantom4rtk", "--gsd", "3", "--no-map", "--quiet"]
+    args += ["--time-limit", "1"]
+    made = CliRunner().invoke(main, args)
+    assert made.exit_code == 0, made.output
+    return out / "mission.plan"
+
+
+def test_replay_on_the_simulated_copter_judges_frame_and_heading(tmp_path: Path) -> None:
+    """The simulated copter turns at each CONDITION_YAW; its CAMERA_FEEDBACK headings are the
+    plan's, and the judge passes every target inside a turned frame. The same mission with
+    every turn 90 degrees off is flown as written, and then targets fall outside the frames."""
+    plan_file = _framed_demo_plan(tmp_path / "out")
+    replay = ["sitl", "replay", "--dem", str(DEMO / "site.tif")]
+    replay += ["--targets", str(DEMO / "targets.kml"), "--speedup", "200"]
+    result = CliRunner().invoke(main, [*replay, "--plan", str(plan_file)])
+    assert result.exit_code == 0, result.output
+    assert "targets   16 of 16 seen" in result.output
+    assert "frame 13.2x8.8 mm / 8.8 mm at each photo's heading, GSD 3 cm" in result.output
+    data = json.loads(plan_file.read_text())
+    for item in data["mission"]["items"]:
+        if item["command"] == MAV.MAV_CMD_CONDITION_YAW:
+            item["params"][0] = (item["params"][0] + 90.0) % 360.0
+    turned = tmp_path / "turned.plan"
+    turned.write_text(json.dumps(data))
+    result = CliRunner().invoke(main, [*replay, "--plan", str(turned)])
+    assert result.exit_code == 1
+    assert "no photo holds it in its frame" in result.output
+    assert "result    FAIL" in result.output
+
+
+def test_a_photo_off_its_heading_is_a_problem() -> None:
+    """A CAMERA_FEEDBACK heading more than 5 degrees off its waypoint's is reported."""
+    import pyproj as _pyproj
+
+    from urpt_gcs.sitl.judge import _photo_headings
+    from urpt_gcs.sitl.replay import PhotoFix
+
+    mission = _mission("ardupilot", [10.0, 100.0, 200.0])
+    photos = [PhotoFix(k + 1, 47.0, 9.0, 50.0, k, h) for k, h in enumerate([12.0, 94.0, 200.0])]
+
+    class _Flight:
+        pass
+
+    flight = _Flight()
+    flight.photos = photos  # type: ignore[attr-defined]
+    problems: list[str] = []
+    crs = _pyproj.CRS.from_epsg(32632)
+    xy = np.array([[500_000.0, 5_200_000.0]] * 3)
+    grid = _photo_headings(flight, mission, crs, xy, problems)  # type: ignore[arg-type]
+    assert len(problems) == 1 and problems[0].startswith("photo 2 was taken at heading 94.0")
+    # On the central meridian grid and true north agree.
+    assert grid.tolist() == pytest.approx([12.0, 94.0, 200.0], abs=1e-6)

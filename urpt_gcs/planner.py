@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
+from urpt_gcs.camera import Frame, true_bearing_deg
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance, cover_sets, instance_bytes
 from urpt_gcs.inputs import require_memory
@@ -59,7 +60,6 @@ from urpt_gcs.visibility import (
     DEFAULT_HEADINGS,
     BoolArray,
     Camera,
-    Frame,
     Region,
     visibility_regions,
 )
@@ -727,23 +727,10 @@ def _headings(
             turn = (grid[k] - grid[k - 1] + 180.0) % 360.0 - 180.0
             if abs(turn) > 90.0:
                 grid[k] = (grid[k] + 180.0) % 360.0
-    true = _true_bearing(crs, tour.points_xy, grid)
+    true = true_bearing_deg(crs, tour.points_xy, grid)
     written = np.round(true / _HEADING_STEP_DEG) * _HEADING_STEP_DEG % 360.0
     back: FloatArray = grid + (written - true)
     return written, back
-
-
-def _true_bearing(crs: pyproj.CRS, xy: FloatArray, grid_deg: FloatArray) -> FloatArray:
-    """The true bearing (from north, clockwise) of the grid bearing ``grid_deg`` at ``xy``:
-    they differ by the grid's meridian convergence, up to a few degrees in UTM."""
-    psi = np.radians(grid_deg)
-    ahead = xy + 100.0 * np.column_stack([np.sin(psi), np.cos(psi)])
-    to_geo = pyproj.Transformer.from_crs(crs, WGS84, always_xy=True)
-    lon0, lat0 = to_geo.transform(xy[:, 0], xy[:, 1])
-    lon1, lat1 = to_geo.transform(ahead[:, 0], ahead[:, 1])
-    azimuth, _, _ = pyproj.Geod(ellps="WGS84").inv(lon0, lat0, lon1, lat1)
-    out: FloatArray = np.asarray(azimuth, dtype=np.float64) % 360.0
-    return out
 
 
 def _altitude_rel(area: _Area) -> float:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from urpt_gcs.camera import CAMERAS, frame_from_flags
 from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.link import DEFAULT_URL
@@ -15,7 +16,7 @@ from urpt_gcs.mission import FIRMWARES, MissionSettings
 from urpt_gcs.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
-from urpt_gcs.visibility import CAMERAS, DEFAULT_HEADINGS, frame_from_flags
+from urpt_gcs.visibility import DEFAULT_HEADINGS
 
 
 @main.command("plan")
