@@ -458,15 +458,29 @@ def build_instance(
 ) -> Instance:
     """Candidate viewpoints with verified cover sets, on the plane (no distance matrix).
 
-    A frame camera offers every candidate point at each of its headings: one node per
-    (point, heading), the copies of a point at distance 0 from each other. A region's boundary
-    sample is kept when some heading sees its own target.
+    A frame camera offers every candidate at each of its headings, one node per (point,
+    heading): along each ray a region's boundary sample is first pulled in to where the frame
+    at that heading still holds the target, and the nadir point is offered at every heading
+    (copies at distance 0 from each other).
     """
     nadir = np.asarray(targets_xy, dtype=np.float64)
     own = np.concatenate([np.full(len(r.reach_m), r.target, dtype=np.int64) for r in regions])
     az = np.concatenate([r.azimuth_rad for r in regions])
     reach = np.concatenate([r.reach_m for r in regions])
-    points, owners = [nadir], [np.arange(len(nadir), dtype=np.int64)]
+    heading = np.zeros(len(own))
+    nadir_own = np.arange(len(nadir), dtype=np.int64)
+    nadir_heading = np.zeros(len(nadir))
+    if camera.frame is not None:
+        # Each sample at each heading, pulled in to the frame's edge along its ray.
+        choices = camera.heading_choices_deg
+        k = len(choices)
+        heading = np.tile(choices, len(own))
+        own, az, reach = np.repeat(own, k), np.repeat(az, k), np.repeat(reach, k)
+        height = camera.altitude_m - ground_m[own]
+        reach = np.minimum(reach, _frame_reach(camera, az, heading, height))
+        nadir_heading = np.tile(choices, len(nadir))
+        nadir_own = np.repeat(nadir_own, k)
+    points, owners, headings = [nadir[nadir_own]], [nadir_own], [nadir_heading]
     pending = np.ones(len(own), dtype=bool)
     for inset_cells in _INSETS_CELLS:
         idx = np.flatnonzero(pending)
@@ -478,22 +492,19 @@ def build_instance(
         eye = np.column_stack([xy, np.full(len(xy), camera.altitude_m)])
         tgt = np.column_stack([nadir[own[idx]], ground_m[own[idx]]])
         ok = line_of_sight(terrain, eye, tgt, workers)
-        if camera.frame is not None:
-            ok &= _seen_at_some_heading(camera, xy, nadir[own[idx]], ground_m[own[idx]])
+        ok &= camera.in_view(xy, nadir[own[idx]], ground_m[own[idx]], heading[idx])
         points.append(xy[ok])
         owners.append(own[idx[ok]])
+        headings.append(heading[idx[ok]])
         pending[idx[ok]] = False
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
-    headings = None
-    if camera.frame is not None:
-        choices = camera.heading_choices_deg
-        headings = np.tile(choices, len(viewpoints))
-        viewpoints = np.repeat(viewpoints, len(choices), axis=0)
-        owner = np.repeat(owner, len(choices))
+    node_heading = np.concatenate(headings) if camera.frame is not None else None
     # Every viewpoint sees at least the target it was made for.
     require_instance_memory(len(viewpoints), len(viewpoints))
-    vp_idx, tg_idx = cover_pairs(terrain, viewpoints, nadir, ground_m, camera, workers, headings)
+    vp_idx, tg_idx = cover_pairs(
+        terrain, viewpoints, nadir, ground_m, camera, workers, node_heading
+    )
 
     def oracle(points_xy: FloatArray) -> BoolArray:
         pts = np.asarray(points_xy, dtype=np.float64)
@@ -515,15 +526,23 @@ def build_instance(
         ),
         # A stop placed by a solver has no heading: what it sees is only defined for the cone.
         oracle=oracle if camera.frame is None else None,
-        heading_deg=headings,
+        heading_deg=node_heading,
     )
 
 
-def _seen_at_some_heading(
-    camera: Camera, eye_xy: FloatArray, target_xy: FloatArray, ground_m: FloatArray
-) -> BoolArray:
-    """Whether the frame at one of the camera's headings holds each target."""
-    seen = np.zeros(len(eye_xy), dtype=bool)
-    for heading in camera.heading_choices_deg:
-        seen |= camera.in_view(eye_xy, target_xy, ground_m, np.full(len(eye_xy), heading))
-    return seen
+def _frame_reach(
+    camera: Camera, azimuth_rad: FloatArray, heading_deg: FloatArray, height_m: FloatArray
+) -> FloatArray:
+    """How far from a target, along each azimuth (counter-clockwise from east), the frame at
+    each heading still holds it, ``height_m`` below the camera."""
+    assert camera.frame is not None
+    ux, uy = np.cos(azimuth_rad), np.sin(azimuth_rad)
+    psi = np.radians(heading_deg)
+    along = np.abs(ux * np.sin(psi) + uy * np.cos(psi))
+    across = np.abs(ux * np.cos(psi) - uy * np.sin(psi))
+    with np.errstate(divide="ignore"):
+        out: FloatArray = np.minimum(
+            height_m * camera.frame.half_tan_across / across,
+            height_m * camera.frame.half_tan_along / along,
+        )
+    return out
