@@ -263,7 +263,31 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     )
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
     fig.tight_layout()
+    _draw_altitude_curve(fig, data)
     return fig
+
+
+def _draw_altitude_curve(fig: Figure, data: dict[str, Any]) -> None:
+    """With --altitude auto, the curve in the upper left corner: altitude against tour
+    length and flight time, the kept altitude marked."""
+    curve = [p for p in data.get("altitude_curve", []) if p["flight_time_s"] is not None]
+    if not curve:
+        return
+    inset = fig.add_axes((0.09, 0.72, 0.2, 0.16))
+    altitude = [p["altitude_amsl_m"] for p in curve]
+    minutes = [p["flight_time_s"] / 60.0 for p in curve]
+    length = [p["tour_length_m"] for p in curve]
+    inset.plot(altitude, minutes, "o-", color="C3", markersize=3, label="flight (min)")
+    inset.axvline(data["altitude_best_amsl_m"], color="black", linestyle=":", linewidth=0.8)
+    inset.set_xlabel("altitude (m AMSL)", fontsize=6)
+    inset.set_ylabel("flight time (min)", fontsize=6, color="C3")
+    inset.tick_params(labelsize=6)
+    twin = inset.twinx()
+    twin.plot(altitude, length, "s--", color="C0", markersize=3)
+    twin.set_ylabel("tour (m)", fontsize=6, color="C0")
+    twin.tick_params(labelsize=6)
+    inset.set_title("--altitude auto", fontsize=7)
+    inset.patch.set_alpha(0.85)
 
 
 def _scale_bar_and_north(ax: Any, lo: FloatArray, hi: FloatArray) -> None:

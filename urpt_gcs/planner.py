@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyproj
@@ -63,6 +64,9 @@ from urpt_gcs.visibility import (
     Region,
     visibility_regions,
 )
+
+if TYPE_CHECKING:
+    from urpt_gcs.altitude import AltitudeSweep
 
 # Extra DEM read around the operating area, in cells, so bilinear samples at its edge exist.
 _WINDOW_MARGIN_CELLS = 4
@@ -197,6 +201,8 @@ class Plan:
     timings_s: dict[str, float]
     warnings: tuple[str, ...]
     sortie_order: SortieOrder | None = None
+    # With --altitude auto: every altitude planned and the one kept.
+    altitude_sweep: AltitudeSweep | None = None
 
     @property
     def flown_length_m(self) -> float:

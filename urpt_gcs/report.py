@@ -169,6 +169,28 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "warnings": list(plan.warnings),
         "files": files or [],
         **_frame_camera(plan),
+        **_altitude_curve(plan),
+    }
+
+
+def _altitude_curve(plan: Plan) -> dict[str, Any]:
+    """With --altitude auto: each altitude planned, what it flies, and the one kept."""
+    sweep = plan.altitude_sweep
+    if sweep is None:
+        return {}
+    return {
+        "altitude_curve": [
+            {
+                "altitude_amsl_m": p.altitude_m,
+                "tour_length_m": None if p.tour_length_m is None else round(p.tour_length_m, 2),
+                "flight_time_s": None if p.flight_time_s is None else round(p.flight_time_s, 1),
+                "wall_s": round(p.wall_s, 2),
+                "error": p.error,
+            }
+            for p in sweep.points
+        ],
+        "altitude_best_amsl_m": sweep.best_altitude_m,
+        "altitude_sweep_wall_s": round(sweep.wall_s, 2),
     }
 
 
@@ -325,6 +347,22 @@ def summary_text(data: dict[str, Any]) -> str:
                 "solver's "
                 f"{data['solver_tour_length_m']:.0f} m tour cut as it is "
                 f"({found['moves']} moves in {found['search_s']:.1f} s)"
+            )
+    curve = data.get("altitude_curve")
+    if curve is not None:
+        lines.append(
+            f"altitude auto  {len(curve)} planes in {data['altitude_sweep_wall_s']:.1f} s; "
+            f"kept {data['altitude_best_amsl_m']:.1f} m (shortest flight time)"
+        )
+        for point in curve:
+            mark = " <" if point["altitude_amsl_m"] == data["altitude_best_amsl_m"] else ""
+            if point["flight_time_s"] is None:
+                lines.append(f"               {point['altitude_amsl_m']:7.1f} m  {point['error']}")
+                continue
+            lines.append(
+                f"               {point['altitude_amsl_m']:7.1f} m  tour "
+                f"{point['tour_length_m']:7.1f} m  flight {_minutes(point['flight_time_s'])}"
+                f"  ({point['wall_s']:.1f} s){mark}"
             )
     lines.append("stops          #  sortie  from prev   ETA      sees")
     shown = data["stops"][:25]

@@ -75,9 +75,16 @@ from urpt_gcs.visibility import DEFAULT_HEADINGS
 )
 @click.option(
     "--altitude",
-    type=float,
     default=None,
-    help="Flight-plane altitude in the DEM's vertical datum, metres.",
+    help="Flight-plane altitude in the DEM's vertical datum, metres; or auto: plan a range "
+    "of altitudes in parallel and keep the shortest flight.",
+)
+@click.option(
+    "--altitude-steps",
+    type=int,
+    default=6,
+    show_default=True,
+    help="With --altitude auto: how many altitudes to plan.",
 )
 @click.option(
     "--clearance",
@@ -185,7 +192,8 @@ def plan_command(
     headings: int,
     gsd: float | None,
     samples: int,
-    altitude: float | None,
+    altitude: str | None,
+    altitude_steps: int,
     clearance: float,
     min_clearance: float,
     position_tolerance: float,
@@ -218,6 +226,15 @@ def plan_command(
         export = None
         if export_gtsp is not None:
             export = check_extra(export_gtsp, "--export-gtsp", destination)
+        auto = altitude is not None and altitude.strip().lower() == "auto"
+        altitude_m = None
+        if altitude is not None and not auto:
+            try:
+                altitude_m = float(altitude)
+            except ValueError:
+                raise SettingsError(
+                    f"--altitude {altitude!r} is not a number of metres: give one, or auto"
+                ) from None
         frame = frame_from_flags(camera, sensor, focal, image)
         if frame is not None and fov is not None:
             raise SettingsError(
@@ -230,7 +247,7 @@ def plan_command(
             gsd_cm=gsd,
             headings=headings,
             samples=samples,
-            altitude_m=altitude,
+            altitude_m=None if auto else altitude_m,
             clearance_m=clearance,
             min_clearance_m=min_clearance,
             position_tolerance_m=position_tolerance,
@@ -255,7 +272,14 @@ def plan_command(
         stream = sys.stderr if live else sys.stdout
         with StageProgress(stream, time_limit, live=live) as progress:
             say = None if quiet or as_json else progress
-            result = plan(Path(dem), Path(targets), settings, progress=say)
+            if auto:
+                from urpt_gcs.altitude import best_altitude
+
+                result = best_altitude(
+                    Path(dem), Path(targets), settings, altitude_steps, progress=say
+                )
+            else:
+                result = plan(Path(dem), Path(targets), settings, progress=say)
             if say is not None:
                 say("writing outputs")
             also = []
