@@ -311,3 +311,44 @@ def test_a_photo_off_its_heading_is_a_problem() -> None:
     assert len(problems) == 1 and problems[0].startswith("photo 2 was taken at heading 94.0")
     # On the central meridian grid and true north agree.
     assert grid.tolist() == pytest.approx([12.0, 94.0, 200.0], abs=1e-6)
+
+
+def test_altitude_auto_keeps_the_shortest_flight_of_its_range(tmp_path: Path) -> None:
+    """Three altitudes from the --clearance plane up to what --gsd allows, planned in two
+    processes: the kept plan flies the least time of the curve, at its altitude, and every
+    altitude lies in the range computed here from the terrain and the camera."""
+    args = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
+    args += ["--out", str(tmp_path), "--camera", "phantom4rtk", "--gsd", "3", "--quiet"]
+    args += ["--altitude", "auto", "--altitude-steps", "3", "--time-limit", "1", "--json"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    curve = data["altitude_curve"]
+    assert len(curve) == 3
+    times = {p["altitude_amsl_m"]: p["flight_time_s"] for p in curve}
+    best = min(times, key=lambda a: times[a])
+    assert data["altitude_best_amsl_m"] == best == pytest.approx(data["altitude_amsl_m"], abs=0.01)
+    assert data["flight_time_s"] == pytest.approx(times[best], abs=0.2)
+    # The range: 30 m over the highest terrain up to the GSD distance over the lowest target.
+    raster = load_raster(DEMO / "site.tif")
+    lowest = min(
+        float(raster.height(np.array([lon]), np.array([lat]))[0])
+        for _, lat, lon in _kml_targets(DEMO / "targets.kml")
+    )
+    far = 0.03 * 8.8 / max(13.2 / 5472, 8.8 / 3648)
+    altitudes = sorted(times)
+    assert altitudes[0] == pytest.approx(data["terrain_max_m"] + 30.0, abs=0.01)
+    assert altitudes[-1] <= lowest + far
+    assert altitudes[-1] > altitudes[0] + 10.0
+    assert (tmp_path / "map.png").stat().st_size > 0
+    # The mission flies the kept altitude.
+    flown = read_waypoints_file(tmp_path / "mission.waypoints")
+    for _, _, amsl in flown.waypoints:
+        assert amsl == pytest.approx(best, abs=0.05)
+
+
+def test_altitude_must_be_a_number_or_auto(tmp_path: Path) -> None:
+    args = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
+    result = CliRunner().invoke(main, [*args, "--out", str(tmp_path), "--altitude", "high"])
+    assert result.exit_code == 1
+    assert "--altitude 'high' is not a number of metres: give one, or auto" in result.output
