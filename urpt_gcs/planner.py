@@ -772,9 +772,10 @@ def _check_cone_width(
         return
     if camera.frame is not None:
         raise SettingsError(
-            f"the camera sees only {cone[i] * 100:.2g} cm around target '{names[i]}' at its "
-            f"--gsd distance, under the {least:g} m a stop needs (twice --position-tolerance): "
-            "ask for a coarser --gsd, or lower --position-tolerance"
+            f"the frame camera sees only {cone[i] * 100:.2g} cm around target '{names[i]}' "
+            f"(its short side, within any --gsd distance), under the {least:g} m a stop needs "
+            "(twice --position-tolerance): raise --altitude or --clearance, ask for a coarser "
+            "--gsd, or lower --position-tolerance"
         )
     height = camera.altitude_m - float(ground_m[i])
     need = math.ceil(math.degrees(math.atan(least / height)) * 1000) / 1000
