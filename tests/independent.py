@@ -57,6 +57,20 @@ def load_raster(path: Path) -> Raster:
 class FlownMission:
     home: tuple[float, float, float]  # lat, lon, AMSL
     waypoints: list[tuple[float, float, float]]  # lat, lon, AMSL
+    # The heading each waypoint's photo is taken at (true, degrees; None: not commanded).
+    headings: list[float | None] | None = None
+
+
+@dataclass
+class FrameCamera:
+    """A nadir frame camera: the sensor's width across the vehicle, its height along it."""
+
+    sensor_w_mm: float
+    sensor_h_mm: float
+    focal_mm: float
+    image_w_px: int
+    image_h_px: int
+    gsd_cm: float | None = None
 
 
 def read_waypoints_file(path: Path) -> FlownMission:
@@ -65,13 +79,54 @@ def read_waypoints_file(path: Path) -> FlownMission:
     items = [loader.wp(i) for i in range(loader.count())]
     home = items[0]
     assert home.frame == mavutil.mavlink.MAV_FRAME_GLOBAL
-    wps = [
-        (w.x, w.y, home.z + w.z)
-        for w in items[1:]
-        if w.command == mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
-        and w.frame == mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
-    ]
-    return FlownMission(home=(home.x, home.y, home.z), waypoints=wps)
+    wps = []
+    headings: list[float | None] = []
+    pending: float | None = None
+    for w in items[1:]:
+        if w.command == mavutil.mavlink.MAV_CMD_CONDITION_YAW and w.param4 == 0:
+            pending = float(w.param1)
+        if (
+            w.command == mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
+            and w.frame == mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        ):
+            wps.append((w.x, w.y, home.z + w.z))
+            headings.append(pending)
+            pending = None
+    return FlownMission(home=(home.x, home.y, home.z), waypoints=wps, headings=headings)
+
+
+def sees_in_frame(
+    raster: Raster,
+    target: tuple[float, float],
+    eye: tuple[float, float, float],
+    heading_deg: float,
+    camera: FrameCamera,
+) -> tuple[bool, str]:
+    """Whether a photo from eye=(lat, lon, AMSL) with the vehicle heading ``heading_deg``
+    (true north) holds target=(lat, lon) inside its frame, within the GSD distance, in sight.
+
+    Offsets come from the geodesic from the eye to the target: its true azimuth against the
+    heading gives the parts along and across the vehicle."""
+    z_t = float(raster.height(np.array([target[1]]), np.array([target[0]]))[0])
+    if not math.isfinite(z_t):
+        return False, "target on unknown ground"
+    azimuth, _, dist = GEOD.inv(eye[1], eye[0], target[1], target[0])
+    h = eye[2] - z_t
+    turn = math.radians(azimuth - heading_deg)
+    along, across = dist * math.cos(turn), dist * math.sin(turn)
+    half_along = h * camera.sensor_h_mm / (2.0 * camera.focal_mm)
+    half_across = h * camera.sensor_w_mm / (2.0 * camera.focal_mm)
+    if abs(along) > half_along * 1.001 + 0.01 or abs(across) > half_across * 1.001 + 0.01:
+        return False, (
+            f"outside the frame (along {along:.2f}/{half_along:.2f} m, across "
+            f"{across:.2f}/{half_across:.2f} m)"
+        )
+    if camera.gsd_cm is not None:
+        pitch = max(camera.sensor_w_mm / camera.image_w_px, camera.sensor_h_mm / camera.image_h_px)
+        gsd = math.hypot(dist, h) * pitch / camera.focal_mm * 100.0
+        if gsd > camera.gsd_cm * 1.001:
+            return False, f"too coarse ({gsd:.2f} cm/px > {camera.gsd_cm:g})"
+    return sees(raster, target, eye, 89.9)
 
 
 def _segment(
@@ -120,19 +175,27 @@ def check_mission(
     targets: list[tuple[str, float, float]],
     fov_deg: float,
     min_clearance_m: float = 0.0,
+    frame: FrameCamera | None = None,
 ) -> list[str]:
     """Every problem found: unseen targets and legs that clip the terrain. Several files are
-    the sorties of one plan: together they must see every target."""
+    the sorties of one plan: together they must see every target. With a ``frame`` camera a
+    target counts only inside the frame of a photo at its commanded heading."""
     raster = load_raster(dem)
     files = waypoints_file if isinstance(waypoints_file, list) else [waypoints_file]
     sorties = [read_waypoints_file(f) for f in files]
     assert sorties, "no mission file"
     eyes = [w for flown in sorties for w in flown.waypoints]
+    headings = [h for flown in sorties for h in (flown.headings or [None] * len(flown.waypoints))]
     problems = []
+    if frame is not None and None in headings:
+        problems.append("a frame camera's mission leaves some photo's heading to the vehicle")
     for name, lat, lon in targets:
         reasons = []
-        for eye in eyes:
-            ok, why = sees(raster, (lat, lon), eye, fov_deg)
+        for eye, heading in zip(eyes, headings, strict=True):
+            if frame is not None and heading is not None:
+                ok, why = sees_in_frame(raster, (lat, lon), eye, heading, frame)
+            else:
+                ok, why = sees(raster, (lat, lon), eye, fov_deg)
             if ok:
                 break
             reasons.append(why)

@@ -31,7 +31,7 @@ from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.formats import read_plan
 from urpt_gcs.geofence import read_plan_geofence
 from urpt_gcs.link import upload
-from urpt_gcs.mission import Mission
+from urpt_gcs.mission import Mission, photo_headings
 from urpt_gcs.sitl.ardupilot_sitl import RunningSitl, launch, resolve_binary
 from urpt_gcs.sitl.replay import Flight, ReplaySettings, replay
 from urpt_gcs.targets import read_targets
@@ -193,6 +193,29 @@ def test_the_demo_flies_the_estimated_flight_time(sitl: RunningSitl) -> None:
 @needs_sitl
 def test_a_plan_at_fov_40(sitl: RunningSitl, plans: dict[str, Path]) -> None:
     _fly_and_judge(plans["fov40"], sitl, fov_deg=40.0)
+
+
+@needs_sitl
+def test_a_frame_camera_plan_turns_to_each_photos_heading(
+    sitl: RunningSitl, tmp_path: Path
+) -> None:
+    """A Phantom 4 RTK plan at 3 cm/px: ArduCopter turns at each CONDITION_YAW, the heading
+    in each CAMERA_FEEDBACK is the plan's within 5 degrees (the judge checks it), and every
+    target lies inside the turned frame of a photo."""
+    args = ["plan", "--dem", str(SITE), "--targets", str(TARGETS), "--out", str(tmp_path)]
+    args += ["--camera", "phantom4rtk", "--gsd", "3", "--no-map", "--quiet"]
+    made = CliRunner().invoke(main, args)
+    assert made.exit_code == 0, made.output
+    plan = tmp_path / "mission.plan"
+    flight = _fly_and_judge(plan, sitl)
+    planned = photo_headings(_mission(plan))
+    assert planned is not None and len(planned) == len(flight.photos)
+    off = [
+        abs((p.heading_deg - want + 180.0) % 360.0 - 180.0)
+        for p, want in zip(flight.photos, planned, strict=True)
+    ]
+    print(f"headings at CAMERA_FEEDBACK: at most {max(off):.2f} deg off the plan's")
+    assert max(off) <= 5.0
 
 
 @needs_sitl

@@ -194,6 +194,7 @@ class Instance:
     geometry: Geometry | None = None
     oracle: Oracle | None = field(default=None, repr=False, compare=False)
     name: str = ""
+    heading_deg: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = self.covers.n_viewpoints
@@ -209,11 +210,14 @@ class Instance:
             raise ValueError("Instance.points_xy must be n x 2")
         if self.owner is not None and self.owner.shape != (n,):
             raise ValueError("Instance.owner must have one entry per viewpoint")
+        if self.heading_deg is not None and self.heading_deg.shape != (n,):
+            raise ValueError("Instance.heading_deg must have one entry per viewpoint")
         missing = np.flatnonzero(self.covers.per_target() == 0)
         if missing.size:
             raise ValueError(f"targets {missing.tolist()} are seen by no viewpoint")
         # Solvers share these arrays; none may change them.
-        for array in (self.distance, self.depot_distance, self.points_xy, self.owner):
+        arrays = (self.distance, self.depot_distance, self.points_xy, self.owner, self.heading_deg)
+        for array in arrays:
             if array is not None:
                 array.setflags(write=False)
 
@@ -241,7 +245,8 @@ class Instance:
         depot_xy
             The depot, if tours start and end there.
         **fields
-            Other :class:`Instance` fields (``owner``, ``geometry``, ``oracle``, ``name``).
+            Other :class:`Instance` fields (``owner``, ``geometry``, ``oracle``, ``name``,
+            ``heading_deg``).
         """
         pts = np.asarray(points_xy, dtype=np.float64)
         covers = Covers.from_pairs(viewpoint_idx, target_idx, len(pts), n_targets)
@@ -371,8 +376,12 @@ def cover_pairs(
     ground_m: FloatArray,
     camera: Camera,
     workers: int | None = 1,
+    heading_deg: FloatArray | None = None,
 ) -> tuple[IntArray, IntArray]:
     """The (viewpoint, target) index pairs where the viewpoint sees the target.
+
+    A frame camera sees from viewpoint ``v`` at heading ``heading_deg[v]``: the target must
+    lie inside the turned frame (and within the GSD distance) before its line of sight counts.
 
     The pairs within the cone are found through a spatial index and tested by one compiled
     call per chunk of viewpoints, its segments shared among ``workers`` threads (None: every
@@ -399,12 +408,13 @@ def cover_pairs(
             shapely.points(viewpoints_xy[lo:hi]), predicate="dwithin", distance=float(cone.max())
         )
         vp_idx = vp_idx + lo
-        horizontal = np.hypot(
-            viewpoints_xy[vp_idx, 0] - targets_xy[tg_idx, 0],
-            viewpoints_xy[vp_idx, 1] - targets_xy[tg_idx, 1],
+        in_view = camera.in_view(
+            viewpoints_xy[vp_idx],
+            targets_xy[tg_idx],
+            ground_m[tg_idx],
+            None if heading_deg is None else heading_deg[vp_idx],
         )
-        in_cone = horizontal <= cone[tg_idx]
-        vp_idx, tg_idx = vp_idx[in_cone], tg_idx[in_cone]
+        vp_idx, tg_idx = vp_idx[in_view], tg_idx[in_view]
         eye = np.column_stack([viewpoints_xy[vp_idx], np.full(len(vp_idx), camera.altitude_m)])
         tgt = np.column_stack([targets_xy[tg_idx], ground_m[tg_idx]])
         seen = line_of_sight(terrain, eye, tgt, workers)
@@ -422,13 +432,16 @@ def cover_sets(
     ground_m: FloatArray,
     camera: Camera,
     workers: int | None = 1,
+    heading_deg: FloatArray | None = None,
 ) -> BoolArray:
     """Which targets each viewpoint sees, as a dense viewpoints × targets array.
 
     For a few viewpoints (the oracle, the stop margin); the instance uses `cover_pairs`.
     """
     covers = np.zeros((len(viewpoints_xy), len(targets_xy)), dtype=bool)
-    vp_idx, tg_idx = cover_pairs(terrain, viewpoints_xy, targets_xy, ground_m, camera, workers)
+    vp_idx, tg_idx = cover_pairs(
+        terrain, viewpoints_xy, targets_xy, ground_m, camera, workers, heading_deg
+    )
     covers[vp_idx, tg_idx] = True
     return covers
 
@@ -443,12 +456,31 @@ def build_instance(
     terrain_max_m: float,
     workers: int | None = 1,
 ) -> Instance:
-    """Candidate viewpoints with verified cover sets, on the plane (no distance matrix)."""
+    """Candidate viewpoints with verified cover sets, on the plane (no distance matrix).
+
+    A frame camera offers every candidate at each of its headings, one node per (point,
+    heading): along each ray a region's boundary sample is first pulled in to where the frame
+    at that heading still holds the target, and the nadir point is offered at every heading
+    (copies at distance 0 from each other).
+    """
     nadir = np.asarray(targets_xy, dtype=np.float64)
     own = np.concatenate([np.full(len(r.reach_m), r.target, dtype=np.int64) for r in regions])
     az = np.concatenate([r.azimuth_rad for r in regions])
     reach = np.concatenate([r.reach_m for r in regions])
-    points, owners = [nadir], [np.arange(len(nadir), dtype=np.int64)]
+    heading = np.zeros(len(own))
+    nadir_own = np.arange(len(nadir), dtype=np.int64)
+    nadir_heading = np.zeros(len(nadir))
+    if camera.frame is not None:
+        # Each sample at each heading, pulled in to the frame's edge along its ray.
+        choices = camera.heading_choices_deg
+        k = len(choices)
+        heading = np.tile(choices, len(own))
+        own, az, reach = np.repeat(own, k), np.repeat(az, k), np.repeat(reach, k)
+        height = camera.altitude_m - ground_m[own]
+        reach = np.minimum(reach, _frame_reach(camera, az, heading, height))
+        nadir_heading = np.tile(choices, len(nadir))
+        nadir_own = np.repeat(nadir_own, k)
+    points, owners, headings = [nadir[nadir_own]], [nadir_own], [nadir_heading]
     pending = np.ones(len(own), dtype=bool)
     for inset_cells in _INSETS_CELLS:
         idx = np.flatnonzero(pending)
@@ -460,14 +492,19 @@ def build_instance(
         eye = np.column_stack([xy, np.full(len(xy), camera.altitude_m)])
         tgt = np.column_stack([nadir[own[idx]], ground_m[own[idx]]])
         ok = line_of_sight(terrain, eye, tgt, workers)
+        ok &= camera.in_view(xy, nadir[own[idx]], ground_m[own[idx]], heading[idx])
         points.append(xy[ok])
         owners.append(own[idx[ok]])
+        headings.append(heading[idx[ok]])
         pending[idx[ok]] = False
     viewpoints = np.concatenate(points)
     owner = np.concatenate(owners)
+    node_heading = np.concatenate(headings) if camera.frame is not None else None
     # Every viewpoint sees at least the target it was made for.
     require_instance_memory(len(viewpoints), len(viewpoints))
-    vp_idx, tg_idx = cover_pairs(terrain, viewpoints, nadir, ground_m, camera, workers)
+    vp_idx, tg_idx = cover_pairs(
+        terrain, viewpoints, nadir, ground_m, camera, workers, node_heading
+    )
 
     def oracle(points_xy: FloatArray) -> BoolArray:
         pts = np.asarray(points_xy, dtype=np.float64)
@@ -487,5 +524,25 @@ def build_instance(
             fov_deg=camera.fov_deg,
             terrain_max_m=terrain_max_m,
         ),
-        oracle=oracle,
+        # A stop placed by a solver has no heading: what it sees is only defined for the cone.
+        oracle=oracle if camera.frame is None else None,
+        heading_deg=node_heading,
     )
+
+
+def _frame_reach(
+    camera: Camera, azimuth_rad: FloatArray, heading_deg: FloatArray, height_m: FloatArray
+) -> FloatArray:
+    """How far from a target, along each azimuth (counter-clockwise from east), the frame at
+    each heading still holds it, ``height_m`` below the camera."""
+    assert camera.frame is not None
+    ux, uy = np.cos(azimuth_rad), np.sin(azimuth_rad)
+    psi = np.radians(heading_deg)
+    along = np.abs(ux * np.sin(psi) + uy * np.cos(psi))
+    across = np.abs(ux * np.cos(psi) - uy * np.sin(psi))
+    with np.errstate(divide="ignore"):
+        out: FloatArray = np.minimum(
+            height_m * camera.frame.half_tan_across / across,
+            height_m * camera.frame.half_tan_along / along,
+        )
+    return out

@@ -101,6 +101,56 @@ def _draw_sorties(ax: Any, plan: Plan, to_map: pyproj.Transformer) -> list[Float
     return routes
 
 
+def frame_footprints(plan: Plan) -> list[FloatArray]:
+    """Each photo's frame on the ground, in the planning CRS: the rectangle turned by the
+    stop's heading, at the mean ground height of the targets it is counted for (a frame
+    camera only; empty for the cone)."""
+    frame, tour = plan.camera.frame, plan.tour
+    if frame is None or tour.headings_deg is None or tour.points_xy is None:
+        return []
+    out = []
+    corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    for k, (x, y) in enumerate(tour.points_xy):
+        seen = np.flatnonzero(tour.sees[k])
+        ground = float(plan.ground_m[seen].mean()) if seen.size else float(plan.ground_m.min())
+        h = plan.camera.altitude_m - ground
+        across, along = (
+            corners[:, 0] * h * frame.half_tan_across,
+            corners[:, 1] * h * frame.half_tan_along,
+        )
+        psi = math.radians(float(tour.headings_deg[k]))
+        # Across the heading is its right-hand side: (cos, -sin); along it (sin, cos).
+        dx = across * math.cos(psi) + along * math.sin(psi)
+        dy = -across * math.sin(psi) + along * math.cos(psi)
+        out.append(np.column_stack([x + dx, y + dy]))
+    return out
+
+
+def _draw_frames(ax: Any, plan: Plan) -> None:
+    for k, ring in enumerate(frame_footprints(plan)):
+        ax.add_patch(
+            PolygonPatch(
+                ring,
+                closed=True,
+                fill=False,
+                edgecolor="black",
+                linestyle=":",
+                linewidth=0.9,
+                zorder=6,
+                label="photo frame" if k == 0 else None,
+            )
+        )
+
+
+def _camera_words(data: dict[str, Any]) -> str:
+    camera = data.get("camera")
+    if camera is None:
+        return f"camera ±{data['fov_deg']:g}°"
+    w, h = camera["sensor_mm"]
+    gsd = f", worst GSD {camera['worst_gsd_cm']:.2f} cm/px"
+    return f"frame {w:g}x{h:g} mm / {camera['focal_mm']:g} mm{gsd}"
+
+
 def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     """The map as a matplotlib figure; each sortie's route is the line with gid
     ``sortie N``."""
@@ -162,6 +212,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     hx, hy = plan.home_xy
     to_map = pyproj.Transformer.from_crs(WGS84, plan.crs, always_xy=True)
     paths = _draw_sorties(ax, plan, to_map)
+    _draw_frames(ax, plan)
     ax.scatter(
         [hx], [hy], marker="*", s=260, c="white", edgecolors="black", zorder=11, label="home"
     )
@@ -207,12 +258,36 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
         f"{'flown' if count > 1 else 'tour'} {data['tour_length_m']:.0f} m"
         f" ({quality}), {data['flight_time_s'] / 60:.1f} min{sorties}\n"
         f"altitude {data['altitude_amsl_m']:.1f} m AMSL / {data['altitude_above_home_m']:.1f} m "
-        f"above home, camera ±{data['fov_deg']:g}°, solver {data['solver']}",
+        f"above home, {_camera_words(data)}, solver {data['solver']}",
         fontsize=10,
     )
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
     fig.tight_layout()
+    _draw_altitude_curve(fig, data)
     return fig
+
+
+def _draw_altitude_curve(fig: Figure, data: dict[str, Any]) -> None:
+    """With --altitude auto, the curve in the upper left corner: altitude against tour
+    length and flight time, the kept altitude marked."""
+    curve = [p for p in data.get("altitude_curve", []) if p["flight_time_s"] is not None]
+    if not curve:
+        return
+    inset = fig.add_axes((0.09, 0.72, 0.2, 0.16))
+    altitude = [p["altitude_amsl_m"] for p in curve]
+    minutes = [p["flight_time_s"] / 60.0 for p in curve]
+    length = [p["tour_length_m"] for p in curve]
+    inset.plot(altitude, minutes, "o-", color="C3", markersize=3, label="flight (min)")
+    inset.axvline(data["altitude_best_amsl_m"], color="black", linestyle=":", linewidth=0.8)
+    inset.set_xlabel("altitude (m AMSL)", fontsize=6)
+    inset.set_ylabel("flight time (min)", fontsize=6, color="C3")
+    inset.tick_params(labelsize=6)
+    twin = inset.twinx()
+    twin.plot(altitude, length, "s--", color="C0", markersize=3)
+    twin.set_ylabel("tour (m)", fontsize=6, color="C0")
+    twin.tick_params(labelsize=6)
+    inset.set_title("--altitude auto", fontsize=7)
+    inset.patch.set_alpha(0.85)
 
 
 def _scale_bar_and_north(ax: Any, lo: FloatArray, hi: FloatArray) -> None:

@@ -45,9 +45,11 @@ def _holding(
     points_xy: FloatArray,
     sees: npt.NDArray[np.bool_],
     tolerance_m: float,
+    headings_deg: FloatArray | None = None,
 ) -> npt.NDArray[np.bool_]:
     """Which stops see every target they are counted for from all of their ring, tested
-    in one call: the cone from every ring point, then every line of sight."""
+    in one call: the cone (or the frame at the stop's heading) from every ring point, then
+    every line of sight."""
     stop, target = np.nonzero(sees)
     angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
     offsets = np.vstack(
@@ -56,8 +58,8 @@ def _holding(
     eye_xy = (points_xy[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
     pair_stop = np.repeat(stop, len(offsets))
     pair_target = np.repeat(target, len(offsets))
-    horizontal = np.hypot(*(eye_xy - targets_xy[pair_target]).T)
-    ok = horizontal <= camera.cone_radius_m(ground_m[pair_target])
+    heading = None if headings_deg is None else np.repeat(headings_deg[stop], len(offsets))
+    ok = camera.in_view(eye_xy, targets_xy[pair_target], ground_m[pair_target], heading)
     eye = np.column_stack([eye_xy[ok], np.full(int(ok.sum()), camera.altitude_m)])
     tgt = np.column_stack([targets_xy[pair_target[ok]], ground_m[pair_target[ok]]])
     ok[ok] = line_of_sight(terrain, eye, tgt)
@@ -130,32 +132,50 @@ def robust_tour(
     points: list[FloatArray] = []
     sees: list[npt.NDArray[np.bool_]] = []
     order: list[int] = []
+    headings: list[float] = []
     warnings = []
     changed = False
+    stop_headings = (
+        np.zeros(len(tour.points_xy)) if tour.headings_deg is None else tour.headings_deg
+    )
+    framed = tour.headings_deg is not None
 
-    def holds(point: FloatArray, must: npt.NDArray[np.intp]) -> bool:
+    def holds(point: FloatArray, must: npt.NDArray[np.intp], heading: float) -> bool:
         ring = _ring(point, tolerance_m)
-        return bool(cover_sets(terrain, ring, targets_xy[must], ground_m[must], camera).all())
+        at = np.full(len(ring), heading) if framed else None
+        seen = cover_sets(terrain, ring, targets_xy[must], ground_m[must], camera, 1, at)
+        return bool(seen.all())
 
-    def place(point: FloatArray, must: npt.NDArray[np.intp]) -> FloatArray | None:
+    def place(point: FloatArray, must: npt.NDArray[np.intp], heading: float) -> FloatArray | None:
         aim = targets_xy[must].mean(axis=0)
         for step in _STEPS:
             moved: FloatArray = point + step * (aim - point)
-            if holds(moved, must):
+            if holds(moved, must, heading):
                 return moved
         for radius in tolerance_m * _SEARCH_RADII:
             for angle in np.arange(_SEARCH_ANGLES) * (2.0 * math.pi / _SEARCH_ANGLES):
                 around: FloatArray = point + radius * np.array([math.cos(angle), math.sin(angle)])
-                if holds(around, must):
+                if holds(around, must, heading):
                     return around
         return None
 
     stops_xy = np.asarray(tour.points_xy, dtype=np.float64)
 
-    def holding(points_xy: FloatArray, rows: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-        return _holding(terrain, targets_xy, ground_m, camera, points_xy, rows, tolerance_m)
+    def holding(
+        points_xy: FloatArray, rows: npt.NDArray[np.bool_], at: FloatArray
+    ) -> npt.NDArray[np.bool_]:
+        return _holding(
+            terrain,
+            targets_xy,
+            ground_m,
+            camera,
+            points_xy,
+            rows,
+            tolerance_m,
+            at if framed else None,
+        )
 
-    settled = holding(stops_xy, tour.sees)
+    settled = holding(stops_xy, tour.sees, stop_headings)
     # Stops that fail are searched for all at once, try by try in the order `place` takes.
     spots = stops_xy.copy()
     for offset in _tries(stops_xy, tour.sees, targets_xy, tolerance_m):
@@ -163,7 +183,7 @@ def robust_tour(
         if pending.size == 0:
             break
         tried = offset(pending)
-        ok = holding(tried, tour.sees[pending])
+        ok = holding(tried, tour.sees[pending], stop_headings[pending])
         spots[pending[ok]] = tried[ok]
         settled[pending[ok]] = True
     for k, point in enumerate(stops_xy):
@@ -172,18 +192,20 @@ def robust_tour(
             points.append(point)
             sees.append(tour.sees[k])
             order.append(tour.order[k])
+            headings.append(float(stop_headings[k]))
             continue
         changed = True
         if settled[k]:
             points.append(spots[k])
             sees.append(tour.sees[k])
             order.append(-1)
+            headings.append(float(stop_headings[k]))
             continue
         # One stop per target, nearest first from where the tour comes from.
         came_from = points[-1] if points else np.asarray(depot_xy if depot_xy else point)
         for t in sorted(must, key=lambda t: float(np.hypot(*(targets_xy[t] - came_from)))):
             one = np.array([t])
-            spot = place(point, one)
+            spot = place(point, one, float(stop_headings[k]))
             row = np.zeros(tour.sees.shape[1], dtype=bool)
             row[t] = True
             if spot is None:
@@ -196,6 +218,7 @@ def robust_tour(
             points.append(spot)
             sees.append(row)
             order.append(-1)
+            headings.append(float(stop_headings[k]))
     if not changed:
         return tour, warnings
     xy = np.vstack(points)
@@ -210,6 +233,7 @@ def robust_tour(
         order=tuple(order),
         points_xy=xy,
         sees=np.vstack(sees),
+        headings_deg=np.asarray(headings, dtype=np.float64) if framed else None,
         length=length,
         lower_bound=min(tour.lower_bound, length),
         # Optimal over the candidates says nothing more once stops moved, unless no longer.

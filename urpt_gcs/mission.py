@@ -190,6 +190,24 @@ def waypoint_positions(mission: Mission) -> list[tuple[float, float]]:
     ]
 
 
+def photo_headings(mission: Mission) -> list[float] | None:
+    """The heading (true north, degrees) the mission turns the vehicle to for each
+    NAV_WAYPOINT, in flight order: the CONDITION_YAW before it (ArduPilot) or its own yaw
+    (PX4). None when the mission turns it for none of them (a cone camera's mission)."""
+    headings: list[float] = []
+    pending = math.nan
+    for item in mission.items:
+        if item.command == mavlink.MAV_CMD_CONDITION_YAW and item.params[3] == 0:
+            pending = item.params[0] % 360.0
+        elif item.command == mavlink.MAV_CMD_NAV_WAYPOINT:
+            yaw = item.params[3] if mission.firmware == "px4" else math.nan
+            headings.append(yaw % 360.0 if math.isfinite(yaw) else pending)
+            pending = math.nan
+    if all(math.isnan(h) for h in headings):
+        return None
+    return headings
+
+
 def _item(command: int, frame: int, *params: float) -> MissionItem:
     padded = tuple(float(p) for p in params) + (0.0,) * (7 - len(params))
     return MissionItem(command=command, frame=frame, params=padded)  # type: ignore[arg-type]
@@ -200,8 +218,18 @@ def build_mission(
     waypoints: Sequence[tuple[float, float]],
     altitude_rel_m: float,
     settings: MissionSettings,
+    headings_deg: Sequence[float] | None = None,
 ) -> Mission:
     """Build the mission for a tour.
+
+    With ``headings_deg`` (true north, clockwise, one per waypoint) the vehicle is turned
+    before each photo, as each firmware honours it. ArduCopter ignores NAV_WAYPOINT's yaw
+    (``ModeAuto::do_nav_wp``) and resets the yaw to WP_YAW_BEHAVIOR's when a waypoint starts
+    (``wp_start``); a CONDITION_YAW right before the waypoint runs once that waypoint has
+    started, holds the yaw fixed (``verify_yaw`` retakes it each cycle) until it is reached and
+    keeps it through the hold, and the photo after the waypoint fires before the next one
+    starts. PX4 turns to a NAV_WAYPOINT's param4 at the waypoint and counts it reached only
+    within MIS_YAW_ERR of it.
 
     Parameters
     ----------
@@ -213,9 +241,15 @@ def build_mission(
         Flight-plane altitude above home.
     settings
         Firmware, hold time and speeds.
+    headings_deg
+        The vehicle's heading for each photo; None leaves the yaw to the firmware.
     """
     if not waypoints:
         raise SettingsError("a mission needs at least one waypoint")
+    if headings_deg is not None and len(headings_deg) != len(waypoints):
+        raise SettingsError(
+            f"{len(headings_deg)} headings for {len(waypoints)} waypoints: give one per waypoint"
+        )
     if not (math.isfinite(altitude_rel_m) and altitude_rel_m > 0.0):
         raise SettingsError(f"flight altitude {altitude_rel_m} m above home must be positive")
     home = GeoPoint(round_e7(home.lat_deg), round_e7(home.lon_deg), home.amsl_m)
@@ -266,8 +300,15 @@ def build_mission(
                 0,
             )
         )
-    for lat, lon in waypoints:
+    for k, (lat, lon) in enumerate(waypoints):
         yaw = 0.0 if settings.firmware == "ardupilot" else math.nan
+        if headings_deg is not None:
+            heading = float(headings_deg[k]) % 360.0
+            if settings.firmware == "ardupilot":
+                # Absolute heading (param4 0), the default turn rate (0), the shorter way (0).
+                items.append(_item(mavlink.MAV_CMD_CONDITION_YAW, cmd_frame, heading, 0, 0, 0))
+            else:
+                yaw = heading
         items.append(
             _item(
                 mavlink.MAV_CMD_NAV_WAYPOINT,
@@ -364,6 +405,12 @@ _PARAMS: dict[int, tuple[_Range | None, _Range | None, _Range | None, _Range | N
     mavlink.MAV_CMD_NAV_LAND: (None, None, None, _YAW),
     mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: (None, None, None, None),
     mavlink.MAV_CMD_CONDITION_DELAY: (_seconds("delay"), None, None, None),
+    mavlink.MAV_CMD_CONDITION_YAW: (
+        _Range("heading", "deg", 0.0, 360.0, fix="give a heading of 0 to 360 degrees"),
+        _Range("turn rate", "deg/s", 0.0, 360.0, fix="give 0 (default) to 360 deg/s"),
+        _Range("direction", "", -1.0, 1.0, fix="give -1 (ccw), 0 (shorter) or 1 (cw)"),
+        _Range("relative", "", 0.0, 1.0, fix="give 0 (absolute) or 1 (relative)"),
+    ),
     mavlink.MAV_CMD_DO_CHANGE_SPEED: (
         _Range("speed type", "", 0.0, 3.0, fix="give a speed type of 0 to 3 (SPEED_TYPE)"),
         _Range(

@@ -7,15 +7,18 @@ result against the terrain before anyone flies it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyproj
 
+from urpt_gcs.camera import Frame, true_bearing_deg
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance, cover_sets, instance_bytes
 from urpt_gcs.inputs import require_memory
@@ -54,7 +57,16 @@ from urpt_gcs.terrain import (
     read_mosaic,
     sample_points,
 )
-from urpt_gcs.visibility import BoolArray, Camera, Region, visibility_regions
+from urpt_gcs.visibility import (
+    DEFAULT_HEADINGS,
+    BoolArray,
+    Camera,
+    Region,
+    visibility_regions,
+)
+
+if TYPE_CHECKING:
+    from urpt_gcs.altitude import AltitudeSweep
 
 # Extra DEM read around the operating area, in cells, so bilinear samples at its edge exist.
 _WINDOW_MARGIN_CELLS = 4
@@ -86,8 +98,19 @@ class PlanSettings:
     position_tolerance_m: float = 1.5
     band: int | None = None
     workers: int | None = None
+    frame: Frame | None = None
+    gsd_cm: float | None = None
+    headings: int = DEFAULT_HEADINGS
 
     def __post_init__(self) -> None:
+        # The camera's own checks (GSD without pixels, headings out of range) run here, so a
+        # bad flag is refused before any file is read.
+        self.camera_at(0.0)
+        if self.frame is not None and self.solver == "approx":
+            raise SettingsError(
+                "--solver approx places its own stops, which have no heading for a frame "
+                "camera: use --solver auto, exact, heuristic or ortools, or the cone (--fov)"
+            )
         if self.workers is not None and self.workers < 1:
             raise SettingsError(
                 f"--workers {self.workers} is below 1: give a number of threads, or omit it "
@@ -144,6 +167,12 @@ class PlanSettings:
         if self.band is not None and self.band < 1:
             raise SettingsError(f"--band {self.band} is below 1: bands are numbered from 1")
 
+    def camera_at(self, altitude_m: float) -> Camera:
+        """The camera these settings describe, on a plane at ``altitude_m``."""
+        if self.frame is None:
+            return Camera(altitude_m, self.fov_deg, gsd_cm=self.gsd_cm)
+        return Camera.framed(altitude_m, self.frame, self.gsd_cm, self.headings)
+
 
 @dataclass(frozen=True, slots=True)
 class Plan:
@@ -172,6 +201,8 @@ class Plan:
     timings_s: dict[str, float]
     warnings: tuple[str, ...]
     sortie_order: SortieOrder | None = None
+    # With --altitude auto: every altitude planned and the one kept.
+    altitude_sweep: AltitudeSweep | None = None
 
     @property
     def flown_length_m(self) -> float:
@@ -547,7 +578,7 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
     """
     info, crs = site.dem, site.crs
     points_xy = np.vstack([site.targets_xy, np.array([site.home_xy])])
-    tan = math.tan(math.radians(settings.fov_deg))
+    tan = settings.camera_at(0.0).tan_fov
     cell_m = _cell_m(info, crs, points_xy)
     margin = _WINDOW_MARGIN_CELLS * cell_m
     # The ground under the points first, from the few cells around each.
@@ -601,7 +632,8 @@ def _read_area(site: _Site, settings: PlanSettings) -> _Area:
             f"--altitude {altitude:g} m is at or below the ground at home ({home_ground:.1f} m): "
             "raise it or use --clearance"
         )
-    camera = Camera(altitude_m=altitude, fov_deg=settings.fov_deg)
+    camera = settings.camera_at(altitude)
+    _check_gsd(camera, ground, site.names)
     _check_cone_width(camera, ground, site.names, settings.position_tolerance_m)
     return _Area(terrain, ground, home_ground, top, camera)
 
@@ -643,11 +675,20 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
     # written then measures from a height the vehicle is at or above.
     home = GeoPoint(*site.home_lat_lon, math.floor(area.home_ground_m * 100.0) / 100.0)
     stops_latlon = _latlon(site.crs, tour.points_xy)
+    true_headings, written_grid = _headings(site.crs, tour, sorties)
     missions = tuple(
-        build_mission(home, stops_latlon[s.first : s.stop], altitude_rel, settings.mission)
+        build_mission(
+            home,
+            stops_latlon[s.first : s.stop],
+            altitude_rel,
+            settings.mission,
+            None if true_headings is None else true_headings[s.first : s.stop].tolist(),
+        )
         for s in sorties
     )
-    legs = _check_as_written(site, area, missions, sorties, tour.sees, stop_names, settings.workers)
+    legs = _check_as_written(
+        site, area, missions, sorties, tour.sees, stop_names, settings.workers, written_grid
+    )
     warnings = check_legs(legs, settings.min_clearance_m)
     stop_ground = area.terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
     warnings += check_height_above_ground(
@@ -671,10 +712,53 @@ def _fly(site: _Site, area: _Area, tour: Tour, settings: PlanSettings) -> _Fligh
     )
 
 
+# Headings are written to the mission in hundredths of a degree.
+_HEADING_STEP_DEG = 0.01
+
+
+def _headings(
+    crs: pyproj.CRS, tour: Tour, sorties: tuple[Sortie, ...]
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """Each stop's heading as the mission gives it (true north, degrees in [0, 360)) and that
+    written heading back in the planning grid, for the checks; None for the cone.
+
+    A frame looks the same turned half a turn, so each stop takes whichever of its two
+    headings is nearer the stop before it in its sortie: the vehicle never turns more than
+    90 degrees between photos.
+    """
+    if tour.headings_deg is None or tour.points_xy is None:
+        return None, None
+    grid = np.asarray(tour.headings_deg, dtype=np.float64) % 180.0
+    for sortie in sorties:
+        for k in range(sortie.first + 1, sortie.stop):
+            turn = (grid[k] - grid[k - 1] + 180.0) % 360.0 - 180.0
+            if abs(turn) > 90.0:
+                grid[k] = (grid[k] + 180.0) % 360.0
+    true = true_bearing_deg(crs, tour.points_xy, grid)
+    written = np.round(true / _HEADING_STEP_DEG) * _HEADING_STEP_DEG % 360.0
+    back: FloatArray = grid + (written - true)
+    return written, back
+
+
 def _altitude_rel(area: _Area) -> float:
     """The plane's height above home as written: centimetres, rounded up, since a higher eye
     only widens the cone and lifts every line of sight, so nothing checked is lost."""
     return math.ceil((area.camera.altitude_m - area.home_ground_m) * 100.0) / 100.0
+
+
+def _check_gsd(camera: Camera, ground_m: FloatArray, names: list[str]) -> None:
+    """Refuse a plane too high for ``--gsd`` over some target: no photo from it resolves it."""
+    far = camera.max_distance_m
+    height = camera.altitude_m - ground_m
+    i = int(np.argmax(height))
+    if height[i] < far:
+        return
+    assert camera.gsd_cm is not None
+    raise SettingsError(
+        f"--gsd {camera.gsd_cm:g} cm needs the camera within {far:.1f} m of target "
+        f"'{names[i]}', but the plane is {height[i]:.1f} m above it: lower --altitude or "
+        "--clearance, or ask for a coarser --gsd"
+    )
 
 
 def _check_cone_width(
@@ -682,11 +766,18 @@ def _check_cone_width(
 ) -> None:
     """Refuse a camera cone too narrow for a waypoint to be placed inside it, or for the
     vehicle to photograph from within ``tolerance_m`` of it."""
-    cone = camera.cone_radius_m(ground_m)
+    cone = camera.least_half_width_m(ground_m)
     i = int(np.argmin(cone))
     least = max(MIN_CONE_RADIUS_M, 2.0 * tolerance_m)
     if cone[i] >= least:
         return
+    if camera.frame is not None:
+        raise SettingsError(
+            f"the frame camera sees only {cone[i] * 100:.2g} cm around target '{names[i]}' "
+            f"(its short side, within any --gsd distance), under the {least:g} m a stop needs "
+            "(twice --position-tolerance): raise --altitude or --clearance, ask for a coarser "
+            "--gsd, or lower --position-tolerance"
+        )
     height = camera.altitude_m - float(ground_m[i])
     need = math.ceil(math.degrees(math.atan(least / height)) * 1000) / 1000
     seen = f"--fov {camera.fov_deg:g} sees only {cone[i] * 100:.2g} cm around target '{names[i]}'"
@@ -709,6 +800,7 @@ def _check_as_written(
     sees: BoolArray,
     stop_names: list[str],
     workers: int | None,
+    headings_deg: FloatArray | None = None,
 ) -> tuple[Leg, ...]:
     """Check the missions as the vehicle will store them, and return their legs.
 
@@ -717,7 +809,7 @@ def _check_as_written(
     sees, and the legs' clearance is measured between those positions.
     """
     eye_m = missions[0].home.amsl_m + missions[0].altitude_rel_m
-    written_camera = Camera(altitude_m=eye_m, fov_deg=area.camera.fov_deg)
+    written_camera = dataclasses.replace(area.camera, altitude_m=eye_m)
     legs: tuple[Leg, ...] = ()
     stops = []
     for sortie, mission in zip(sorties, missions, strict=True):
@@ -732,7 +824,7 @@ def _check_as_written(
         )
     written = np.vstack(stops)
     seen = cover_sets(
-        area.terrain, written, site.targets_xy, area.ground_m, written_camera, workers
+        area.terrain, written, site.targets_xy, area.ground_m, written_camera, workers, headings_deg
     )
     lost = np.argwhere(sees & ~seen)
     if lost.size:

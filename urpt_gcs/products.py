@@ -89,6 +89,8 @@ def replay_checks(plan: Plan) -> list[ReplayCheck]:
                 targets=tuple(targets[t] for t in np.flatnonzero(seen).tolist()),
                 sortie=number,
                 sorties=len(plan.sorties),
+                frame=plan.camera.frame,
+                gsd_cm=plan.camera.gsd_cm,
             )
         )
     return checks

@@ -140,6 +140,8 @@ _AP_STORED: dict[int, _Stored] = {
     mavlink.MAV_CMD_DO_DIGICAM_CONTROL: _Stored(
         (_UINT8, _UINT8, _int8, _UINT8), False, x=_UINT8, y=_UINT8
     ),
+    # Yaw_Command: angle_deg and turn_rate_dps float, direction int8_t, relative_angle uint8_t.
+    mavlink.MAV_CMD_CONDITION_YAW: _Stored((_f32, _f32, _int8, _UINT8), False),
 }
 _AP_FRAME = {
     mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.mission import Mission
+from urpt_gcs.mission import Mission, photo_headings
 from urpt_gcs.planner import Plan
 
 
@@ -168,7 +168,86 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "timings_s": {k: round(v, 3) for k, v in plan.timings_s.items()},
         "warnings": list(plan.warnings),
         "files": files or [],
+        **_frame_camera(plan),
+        **_altitude_curve(plan),
     }
+
+
+def _altitude_curve(plan: Plan) -> dict[str, Any]:
+    """With --altitude auto: each altitude planned, what it flies, and the one kept."""
+    sweep = plan.altitude_sweep
+    if sweep is None:
+        return {}
+    return {
+        "altitude_curve": [
+            {
+                "altitude_amsl_m": p.altitude_m,
+                "tour_length_m": None if p.tour_length_m is None else round(p.tour_length_m, 2),
+                "flight_time_s": None if p.flight_time_s is None else round(p.flight_time_s, 1),
+                "wall_s": round(p.wall_s, 2),
+                "error": p.error,
+            }
+            for p in sweep.points
+        ],
+        "altitude_best_amsl_m": sweep.best_altitude_m,
+        "altitude_sweep_wall_s": round(sweep.wall_s, 2),
+    }
+
+
+def _frame_camera(plan: Plan) -> dict[str, Any]:
+    """A frame camera's figures: the frame, the headings offered, the ground resolution
+    required and reached per target (the finest photo of it), and each photo's heading as
+    the mission gives it. Nothing for the cone."""
+    camera = plan.camera
+    frame = camera.frame
+    if frame is None:
+        return {}
+    tour = plan.tour
+    assert tour.points_xy is not None
+    names = [t.name for t in plan.targets.targets]
+    reached = {}
+    for t, name in enumerate(names):
+        stops = np.flatnonzero(tour.sees[:, t])
+        horizontal = np.hypot(*(tour.points_xy[stops] - plan.targets_xy[t]).T)
+        slant = np.hypot(horizontal, camera.altitude_m - plan.ground_m[t])
+        reached[name] = round(float(frame.gsd_cm(slant.min())), 3)
+    worst = max(reached, key=lambda n: reached[n])
+    headings = [h for m in plan.missions for h in (photo_headings(m) or [])]
+    return {
+        "camera": {
+            "sensor_mm": [frame.sensor_w_mm, frame.sensor_h_mm],
+            "focal_mm": frame.focal_mm,
+            "image_px": [frame.image_w_px, frame.image_h_px],
+            "headings_offered_deg": camera.heading_choices_deg.tolist(),
+            "gsd_cm_required": camera.gsd_cm,
+            "gsd_cm_per_target": reached,
+            "worst_gsd_cm": reached[worst],
+            "worst_gsd_target": worst,
+            "photo_headings_deg": [round(h, 2) for h in headings],
+        }
+    }
+
+
+def _camera_line(data: dict[str, Any]) -> str:
+    camera = data.get("camera")
+    if camera is None:
+        return f"camera         half-angle {data['fov_deg']:g} deg, {data['samples']} azimuths"
+    w, h = camera["sensor_mm"]
+    iw, ih = camera["image_px"]
+    required = camera["gsd_cm_required"]
+    need = "" if required is None else f" (--gsd {required:g})"
+    return (
+        f"camera         {w:g} x {h:g} mm, {camera['focal_mm']:g} mm, {iw} x {ih} px; "
+        f"{len(camera['headings_offered_deg'])} headings, {data['samples']} azimuths\n"
+        f"ground res.    worst {camera['worst_gsd_cm']:.2f} cm/px{need}; per target, coarsest "
+        f"first: {_coarsest(camera['gsd_cm_per_target'])}"
+    )
+
+
+def _coarsest(per_target: dict[str, float], shown: int = 6) -> str:
+    ranked = sorted(per_target.items(), key=lambda kv: -kv[1])
+    text = ", ".join(f"{name} {gsd:.2f}" for name, gsd in ranked[:shown])
+    return text + (f", ... ({len(ranked) - shown} more)" if len(ranked) > shown else "")
 
 
 def _sortie_order(plan: Plan) -> dict[str, Any] | None:
@@ -242,7 +321,7 @@ def summary_text(data: dict[str, Any]) -> str:
         f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, "
         f"{data['altitude_above_home_m']:.1f} m"
         f" above home; highest terrain {data['terrain_max_m']:.1f} m",
-        f"camera         half-angle {data['fov_deg']:g} deg, {data['samples']} azimuths",
+        _camera_line(data),
         f"home           {home['lat_deg']:.7f}, {home['lon_deg']:.7f} ({home['source']})",
         _dem_line(data["dem"]),
         f"clearance      at least {data['min_leg_clearance_m']} m over terrain on every leg",
@@ -268,6 +347,22 @@ def summary_text(data: dict[str, Any]) -> str:
                 "solver's "
                 f"{data['solver_tour_length_m']:.0f} m tour cut as it is "
                 f"({found['moves']} moves in {found['search_s']:.1f} s)"
+            )
+    curve = data.get("altitude_curve")
+    if curve is not None:
+        lines.append(
+            f"altitude auto  {len(curve)} planes in {data['altitude_sweep_wall_s']:.1f} s; "
+            f"kept {data['altitude_best_amsl_m']:.1f} m (shortest flight time)"
+        )
+        for point in curve:
+            mark = " <" if point["altitude_amsl_m"] == data["altitude_best_amsl_m"] else ""
+            if point["flight_time_s"] is None:
+                lines.append(f"               {point['altitude_amsl_m']:7.1f} m  {point['error']}")
+                continue
+            lines.append(
+                f"               {point['altitude_amsl_m']:7.1f} m  tour "
+                f"{point['tour_length_m']:7.1f} m  flight {_minutes(point['flight_time_s'])}"
+                f"  ({point['wall_s']:.1f} s){mark}"
             )
     lines.append("stops          #  sortie  from prev   ETA      sees")
     shown = data["stops"][:25]

@@ -259,6 +259,7 @@ def order_sorties(
         order=tuple(tour.order[i] for i in order.tolist()),
         points_xy=xy[order],
         sees=tour.sees[order],
+        headings_deg=None if tour.headings_deg is None else tour.headings_deg[order],
         length=length,
         proven_optimal=tour.proven_optimal and length <= tour.length,
         notes=(

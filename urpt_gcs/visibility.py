@@ -28,6 +28,7 @@ import shapely
 from numba import njit
 from shapely.geometry import Polygon
 
+from urpt_gcs.camera import Frame
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.segments import clear_of_terrain, resolve_workers
 from urpt_gcs.terrain import FloatArray, Terrain, bilinear_at
@@ -38,12 +39,27 @@ BoolArray = npt.NDArray[np.bool_]
 _MIN_PARALLEL_TARGETS = 64
 
 
+# Headings each candidate viewpoint is offered at, by default: a frame looks the same turned
+# by 180 degrees, so these span every distinct orientation in steps of 45 degrees.
+DEFAULT_HEADINGS = 4
+
+
 @dataclass(frozen=True, slots=True)
 class Camera:
-    """A nadir camera on a constant-altitude flight plane."""
+    """A nadir camera on a constant-altitude flight plane.
+
+    Without a ``frame`` it is the cone of half-angle ``fov_deg``. With one it is that frame
+    turned by the vehicle's heading, and ``fov_deg`` is the half-angle to the frame's corner:
+    the cone that holds the frame at every heading. ``gsd_cm`` caps the distance from the
+    lens to what a photo counts as seen (a frame camera only). Headings are degrees clockwise
+    from grid north of the planning CRS; a frame camera is offered at ``headings`` of them.
+    """
 
     altitude_m: float
     fov_deg: float
+    frame: Frame | None = None
+    gsd_cm: float | None = None
+    headings: int = 1
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
@@ -52,15 +68,115 @@ class Camera:
             )
         if not math.isfinite(self.altitude_m):
             raise SettingsError(f"--altitude {self.altitude_m} is not a number")
+        if self.gsd_cm is not None:
+            if self.frame is None:
+                raise SettingsError(
+                    "--gsd needs the camera's pixels: give --camera NAME or --sensor, --focal "
+                    "and --image"
+                )
+            if not (math.isfinite(self.gsd_cm) and 0.0 < self.gsd_cm <= 1000.0):
+                raise SettingsError(f"--gsd {self.gsd_cm} cm is out of range: give 0 to 1000 cm")
+        if not 1 <= self.headings <= 180:
+            raise SettingsError(f"--headings {self.headings} is out of range: give 1 to 180")
+
+    @classmethod
+    def framed(
+        cls,
+        altitude_m: float,
+        frame: Frame,
+        gsd_cm: float | None = None,
+        headings: int = DEFAULT_HEADINGS,
+    ) -> Camera:
+        """A frame camera; its ``fov_deg`` is the half-angle to the frame's corner."""
+        fov = math.degrees(math.atan(frame.diagonal_tan))
+        return cls(altitude_m, fov, frame, gsd_cm, headings)
 
     @property
     def tan_fov(self) -> float:
         return math.tan(math.radians(self.fov_deg))
 
+    @property
+    def max_distance_m(self) -> float:
+        """The farthest a target may be from the lens (the GSD cap; inf without one)."""
+        if self.frame is None or self.gsd_cm is None:
+            return math.inf
+        return self.frame.distance_for_gsd_m(self.gsd_cm)
+
+    @property
+    def heading_choices_deg(self) -> FloatArray:
+        """The headings a candidate viewpoint is offered at (one, 0, for the cone)."""
+        k = self.headings if self.frame is not None else 1
+        out: FloatArray = np.arange(k, dtype=np.float64) * (180.0 / k)
+        return out
+
     def cone_radius_m(self, ground_m: npt.ArrayLike) -> FloatArray:
-        """Radius on the plane of the cone of a target at ground height ``ground_m``."""
-        h = self.altitude_m - np.asarray(ground_m, dtype=np.float64)
-        return np.maximum(h, 0.0) * self.tan_fov
+        """Radius on the plane of what may see a target at ground height ``ground_m``: the
+        cone (the frame's corner at any heading), within the GSD distance of it."""
+        h = np.maximum(self.altitude_m - np.asarray(ground_m, dtype=np.float64), 0.0)
+        cone: FloatArray = h * self.tan_fov
+        far = self.max_distance_m
+        if math.isfinite(far):
+            within = np.sqrt(np.maximum(far * far - h * h, 0.0))
+            cone = np.where(h <= far, np.minimum(cone, within), 0.0)
+        return cone
+
+    def in_view(
+        self,
+        eye_xy: FloatArray,
+        target_xy: FloatArray,
+        ground_m: FloatArray,
+        heading_deg: FloatArray | None = None,
+    ) -> BoolArray:
+        """Whether each target lies in the picture taken from ``eye_xy[k]`` (terrain aside).
+
+        The cone and the GSD distance; for a frame camera, inside the frame turned by
+        ``heading_deg[k]`` (needed then).
+        """
+        eye = np.asarray(eye_xy, dtype=np.float64).reshape(-1, 2)
+        tgt = np.asarray(target_xy, dtype=np.float64).reshape(-1, 2)
+        ground = np.asarray(ground_m, dtype=np.float64).reshape(-1)
+        dx, dy = tgt[:, 0] - eye[:, 0], tgt[:, 1] - eye[:, 1]
+        ok: BoolArray = np.hypot(dx, dy) <= self.cone_radius_m(ground)
+        if self.frame is None:
+            return ok
+        if heading_deg is None:
+            raise ValueError("a frame camera needs the heading of every photo")
+        h = np.maximum(self.altitude_m - ground, 0.0)
+        ok &= in_frame(self.frame, dx, dy, h, heading_deg)
+        return ok
+
+    def least_half_width_m(self, ground_m: npt.ArrayLike) -> FloatArray:
+        """The narrowest half-extent of what one photo sees around its centre, per target:
+        the cone's radius, or for a frame its short half-side (within the GSD distance)."""
+        cone = self.cone_radius_m(ground_m)
+        if self.frame is None:
+            return cone
+        h = np.maximum(self.altitude_m - np.asarray(ground_m, dtype=np.float64), 0.0)
+        short = h * min(self.frame.half_tan_across, self.frame.half_tan_along)
+        out: FloatArray = np.minimum(cone, short)
+        return out
+
+
+def in_frame(
+    frame: Frame,
+    dx_m: npt.ArrayLike,
+    dy_m: npt.ArrayLike,
+    height_m: npt.ArrayLike,
+    heading_deg: npt.ArrayLike,
+    tolerance_m: float = 0.0,
+) -> BoolArray:
+    """Whether a point ``(dx, dy)`` (east, north of the camera) ``height_m`` below it lies
+    inside the frame of a nadir photo taken at ``heading_deg`` (clockwise from north):
+    within the half-width across the heading and the half-height along it."""
+    dx, dy = np.asarray(dx_m, dtype=np.float64), np.asarray(dy_m, dtype=np.float64)
+    h = np.asarray(height_m, dtype=np.float64)
+    psi = np.radians(np.asarray(heading_deg, dtype=np.float64))
+    along = dx * np.sin(psi) + dy * np.cos(psi)
+    across = dx * np.cos(psi) - dy * np.sin(psi)
+    ok: BoolArray = (np.abs(across) <= h * frame.half_tan_across + tolerance_m) & (
+        np.abs(along) <= h * frame.half_tan_along + tolerance_m
+    )
+    return ok
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,13 +8,15 @@ from pathlib import Path
 
 import click
 
+from urpt_gcs.camera import CAMERAS, frame_from_flags
 from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
-from urpt_gcs.errors import UrptError
+from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.link import DEFAULT_URL
 from urpt_gcs.mission import FIRMWARES, MissionSettings
 from urpt_gcs.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
+from urpt_gcs.visibility import DEFAULT_HEADINGS
 
 
 @main.command("plan")
@@ -39,9 +41,30 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
     "--fov",
     "fov",
     type=float,
-    default=30.0,
+    default=None,
+    help="Camera half-angle from nadir, degrees: a cone camera [default: 30].",
+)
+@click.option(
+    "--camera",
+    "camera",
+    default=None,
+    help="A frame camera by name: " + ", ".join(sorted(CAMERAS)) + ".",
+)
+@click.option("--sensor", default=None, help="Frame camera's sensor, WIDTHxHEIGHT mm.")
+@click.option("--focal", type=float, default=None, help="Frame camera's focal length, mm.")
+@click.option("--image", default=None, help="Frame camera's image, WIDTHxHEIGHT px.")
+@click.option(
+    "--headings",
+    type=int,
+    default=DEFAULT_HEADINGS,
     show_default=True,
-    help="Camera half-angle from nadir, degrees.",
+    help="Headings over 0-180 deg each viewpoint is offered at (frame camera).",
+)
+@click.option(
+    "--gsd",
+    type=float,
+    default=None,
+    help="Ground resolution every photo must reach at its targets, cm/px (frame camera).",
 )
 @click.option(
     "--samples",
@@ -52,9 +75,16 @@ from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
 )
 @click.option(
     "--altitude",
-    type=float,
     default=None,
-    help="Flight-plane altitude in the DEM's vertical datum, metres.",
+    help="Flight-plane altitude in the DEM's vertical datum, metres; or auto: plan a range "
+    "of altitudes in parallel and keep the shortest flight.",
+)
+@click.option(
+    "--altitude-steps",
+    type=int,
+    default=6,
+    show_default=True,
+    help="With --altitude auto: how many altitudes to plan.",
 )
 @click.option(
     "--clearance",
@@ -154,9 +184,16 @@ def plan_command(
     band: int | None,
     workers: int | None,
     out: str,
-    fov: float,
+    fov: float | None,
+    camera: str | None,
+    sensor: str | None,
+    focal: float | None,
+    image: str | None,
+    headings: int,
+    gsd: float | None,
     samples: int,
-    altitude: float | None,
+    altitude: str | None,
+    altitude_steps: int,
     clearance: float,
     min_clearance: float,
     position_tolerance: float,
@@ -189,10 +226,28 @@ def plan_command(
         export = None
         if export_gtsp is not None:
             export = check_extra(export_gtsp, "--export-gtsp", destination)
+        auto = altitude is not None and altitude.strip().lower() == "auto"
+        altitude_m = None
+        if altitude is not None and not auto:
+            try:
+                altitude_m = float(altitude)
+            except ValueError:
+                raise SettingsError(
+                    f"--altitude {altitude!r} is not a number of metres: give one, or auto"
+                ) from None
+        frame = frame_from_flags(camera, sensor, focal, image)
+        if frame is not None and fov is not None:
+            raise SettingsError(
+                "--fov is the cone camera's half-angle and --camera/--sensor a frame camera: "
+                "give one"
+            )
         settings = PlanSettings(
-            fov_deg=fov,
+            fov_deg=30.0 if fov is None else fov,
+            frame=frame,
+            gsd_cm=gsd,
+            headings=headings,
             samples=samples,
-            altitude_m=altitude,
+            altitude_m=None if auto else altitude_m,
             clearance_m=clearance,
             min_clearance_m=min_clearance,
             position_tolerance_m=position_tolerance,
@@ -217,7 +272,14 @@ def plan_command(
         stream = sys.stderr if live else sys.stdout
         with StageProgress(stream, time_limit, live=live) as progress:
             say = None if quiet or as_json else progress
-            result = plan(Path(dem), Path(targets), settings, progress=say)
+            if auto:
+                from urpt_gcs.altitude import best_altitude
+
+                result = best_altitude(
+                    Path(dem), Path(targets), settings, altitude_steps, progress=say
+                )
+            else:
+                result = plan(Path(dem), Path(targets), settings, progress=say)
             if say is not None:
                 say("writing outputs")
             also = []

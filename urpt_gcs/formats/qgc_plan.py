@@ -25,6 +25,7 @@ from typing import Any, TypeGuard
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from urpt_gcs.camera import Frame
 from urpt_gcs.errors import MissionFileError, SettingsError
 from urpt_gcs.mission import (
     AUTOPILOT_OF,
@@ -83,6 +84,9 @@ class ReplayCheck:
         The targets this sortie must photograph (names and WGS84 positions).
     sortie, sorties
         Which sortie of how many (1 of 1 for a plan in one flight).
+    frame, gsd_cm
+        A frame camera (None: the cone of ``fov_deg``) and the ground resolution each photo
+        had to reach (None: none asked for).
     """
 
     fov_deg: float
@@ -90,6 +94,8 @@ class ReplayCheck:
     targets: tuple[Target, ...]
     sortie: int = 1
     sorties: int = 1
+    frame: Frame | None = None
+    gsd_cm: float | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
@@ -108,6 +114,20 @@ class ReplayCheck:
             "fovDeg": self.fov_deg,
             "minClearanceM": self.min_clearance_m,
             "targets": [{"name": t.name, "lat": t.lat_deg, "lon": t.lon_deg} for t in self.targets],
+            **self._frame_json(),
+        }
+
+    def _frame_json(self) -> dict[str, Any]:
+        if self.frame is None:
+            return {}
+        f = self.frame
+        return {
+            "frame": {
+                "sensorMm": [f.sensor_w_mm, f.sensor_h_mm],
+                "focalMm": f.focal_mm,
+                "imagePx": [f.image_w_px, f.image_h_px],
+                "gsdCm": self.gsd_cm,
+            }
         }
 
 
@@ -307,9 +327,38 @@ def read_replay_check(text: str, source: str) -> ReplayCheck | None:
         targets.append(Target(name, lat, lon))
     fov, clearance = (n for n in numbers if n is not None)
     try:
-        return ReplayCheck(fov, clearance, tuple(targets), sortie, sorties)
+        frame, gsd = _frame(value.get("frame"), where, fix)
+        return ReplayCheck(fov, clearance, tuple(targets), sortie, sorties, frame, gsd)
     except SettingsError as exc:
         raise MissionFileError(f"{where}: {exc}: {fix}") from None
+
+
+def _frame(value: object, where: str, fix: str) -> tuple[Frame | None, float | None]:
+    """The frame camera of a plan's check (None, None for the cone)."""
+    if value is None:
+        return None, None
+    bad = MissionFileError(f"{where}: frame is not sensorMm, focalMm, imagePx and gsdCm: {fix}")
+    if not isinstance(value, dict):
+        raise bad
+    sensor = _numbers(value.get("sensorMm"))
+    image = _numbers(value.get("imagePx"))
+    focal = _numbers([value.get("focalMm")])
+    gsd = value.get("gsdCm")
+    if (
+        sensor is None
+        or image is None
+        or focal is None
+        or len(sensor) != 2
+        or len(image) != 2
+        or None in (*sensor, *image, *focal)
+        or not all(float(p or 0).is_integer() for p in image)
+        or not (gsd is None or (isinstance(gsd, int | float) and not isinstance(gsd, bool)))
+    ):
+        raise bad
+    w, h = (float(v or 0.0) for v in sensor)
+    iw, ih = (int(v or 0) for v in image)
+    frame = Frame(w, h, float(focal[0] or 0.0), iw, ih)
+    return frame, None if gsd is None else float(gsd)
 
 
 def _reject_constant(name: str) -> float:

@@ -2,7 +2,8 @@
 
 Mission order follows ArduPilot's ``AP_Mission``: when a navigation command completes, the
 "do" commands after it run at once (a DO_DIGICAM_CONTROL after a NAV_WAYPOINT photographs at
-that waypoint, after its hold), then the next navigation command starts.
+that waypoint, after its hold), then the next navigation command starts. A CONDITION_YAW turns
+the vehicle at once and stays in force through the next waypoint's hold.
 """
 
 from __future__ import annotations
@@ -141,6 +142,13 @@ def _run_do(vehicle: Vehicle, item: Item) -> None:
         vehicle.take_photo()
     elif item.command == mavlink.MAV_CMD_DO_CHANGE_SPEED and item.param2 > 0.0 and horizontal:
         vehicle.speed_m_s = item.param2
+    elif item.command == mavlink.MAV_CMD_CONDITION_YAW:
+        # param4 1: relative to the heading now, turned the way param3 says (-1 ccw).
+        if item.param4 > 0:
+            turn = item.param1 * (-1.0 if item.param3 < 0 else 1.0)
+            vehicle.heading_deg = (vehicle.heading_deg + turn) % 360.0
+        else:
+            vehicle.heading_deg = item.param1 % 360.0
 
 
 def rtl_steps(vehicle: Vehicle) -> list[Step]:

@@ -15,6 +15,8 @@ class Photo:
     lon_e7: int
     alt_amsl_m: float
     alt_rel_m: float
+    # The vehicle's heading when the photo was taken, degrees clockwise from north.
+    heading_deg: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

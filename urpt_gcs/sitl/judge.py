@@ -2,7 +2,9 @@
 
 A target counts as photographed when some photo was taken from a position that sees it: the
 target is inside the camera's nadir cone (half-angle ``fov``) and the straight line from the
-camera to the target clears the DEM (:func:`urpt_gcs.visibility.line_of_sight`). Photo
+camera to the target clears the DEM (:func:`urpt_gcs.visibility.line_of_sight`); for a frame
+camera, inside the frame turned by the heading the photo's CAMERA_FEEDBACK reported (which
+must be within 5 degrees of the one its waypoint turns to) and within the GSD distance. Photo
 positions are those CAMERA_FEEDBACK reported, at the altitude above home it reported plus the
 planned home's ground elevation, so the DEM's vertical datum cancels out as in planning.
 
@@ -29,20 +31,24 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 import pyproj
 
+from urpt_gcs.camera import Frame, grid_bearing_deg
 from urpt_gcs.formats.qgc_plan import read_replay_check
-from urpt_gcs.mission import Mission, waypoint_positions
+from urpt_gcs.mission import Mission, photo_headings, waypoint_positions
 from urpt_gcs.segments import segment_profile
 from urpt_gcs.targets import Target, read_targets
 from urpt_gcs.terrain import WGS84, FloatArray, Terrain, open_dem, planning_crs, read_terrain
-from urpt_gcs.visibility import line_of_sight
+from urpt_gcs.visibility import BoolArray, in_frame, line_of_sight
 
 if TYPE_CHECKING:
     from urpt_gcs.sitl.replay import Flight
 
 # Photo positions are on MAVLink's 1e-7 degree grid (about 1 cm): allow that on the cone.
 CONE_TOLERANCE_M = 0.02
+# A frame camera's photo must be taken within this of the heading its waypoint turns to.
+HEADING_TOLERANCE_DEG = 5.0
 # Fixes within this of the planned altitude are on a cruise leg.
 CRUISE_BAND_M = 0.5
 # Terrain read around the points, so bilinear samples at the edge exist.
@@ -74,6 +80,8 @@ class Expected:
         Where these came from, for the report (``mission_2.plan, sortie 2 of 3``).
     warnings
         Flags that override the mission's, or a summary that does not fit.
+    frame, gsd_cm
+        The plan's frame camera (None: the cone) and the ground resolution it had to reach.
     """
 
     fov_deg: float
@@ -82,6 +90,8 @@ class Expected:
     names: tuple[str, ...] | None = None
     source: str = "--fov and --min-clearance, every target of --targets"
     warnings: tuple[str, ...] = ()
+    frame: Frame | None = None
+    gsd_cm: float | None = None
 
 
 def expected_checks(
@@ -113,8 +123,10 @@ def expected_checks(
             where = f"{plan_path.name}, sortie {check.sortie} of {check.sorties}"
             targets: tuple[Target, ...] | None = check.targets
             names: tuple[str, ...] | None = None
+            camera = (check.frame, check.gsd_cm)
     else:
         planned, where, names, targets = _from_summary(plan_path, mission, warnings)
+        camera = _camera_from_summary(plan_path) if planned is not None else (None, None)
     if planned is None:
         return Expected(
             fov_deg if fov_deg is not None else DEFAULT_FOV_DEG,
@@ -138,7 +150,24 @@ def expected_checks(
         names,
         where,
         tuple(warnings),
+        *camera,
     )
+
+
+def _camera_from_summary(path: Path) -> tuple[Frame | None, float | None]:
+    """The frame camera a ``summary.json`` names (None, None for the cone)."""
+    try:
+        data: Any = json.loads((path.parent / SUMMARY_FILE).read_text(encoding="utf-8"))
+        camera = data.get("camera")
+        if camera is None:
+            return None, None
+        w, h = (float(v) for v in camera["sensor_mm"])
+        iw, ih = (int(v) for v in camera["image_px"])
+        frame = Frame(w, h, float(camera["focal_mm"]), iw, ih)
+        gsd = camera.get("gsd_cm_required")
+        return frame, None if gsd is None else float(gsd)
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+        return None, None
 
 
 def _from_summary(
@@ -270,8 +299,12 @@ def judge(
 
     if not flight.photos:
         problems.append("no photo was taken: check the mission's DO_DIGICAM_CONTROL items")
+    view = None
+    if expected.frame is not None:
+        headings = _photo_headings(flight, mission, crs, photo_xy, problems)
+        view = _FrameView(expected.frame, expected.gsd_cm, headings)
     seen = _targets_seen(
-        terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan
+        terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan, view
     )
     for row in seen:
         if row.photo is None:
@@ -294,6 +327,58 @@ def judge(
         expected,
         ground0,
     )
+
+
+@dataclass(frozen=True, slots=True)
+class _FrameView:
+    """A frame camera's photos: each holds what lies inside its frame turned by its heading
+    (grid degrees), within the GSD distance."""
+
+    frame: Frame
+    gsd_cm: float | None
+    heading_deg: FloatArray
+
+    def holds(
+        self, photo: npt.NDArray[np.intp], dx: FloatArray, dy: FloatArray, height: FloatArray
+    ) -> BoolArray:
+        ok = in_frame(self.frame, dx, dy, height, self.heading_deg[photo], CONE_TOLERANCE_M)
+        if self.gsd_cm is not None:
+            slant = np.hypot(np.hypot(dx, dy), height)
+            ok &= slant <= self.frame.distance_for_gsd_m(self.gsd_cm) + CONE_TOLERANCE_M
+        return ok
+
+
+def _photo_headings(
+    flight: Flight, mission: Mission, crs: pyproj.CRS, photo_xy: FloatArray, problems: list[str]
+) -> FloatArray:
+    """Each photo's heading in the grid judged on: the one its CAMERA_FEEDBACK reported,
+    which must be within HEADING_TOLERANCE_DEG of the mission's for that photo; the
+    mission's where none was reported."""
+    planned = photo_headings(mission) or []
+    reported = np.array([p.heading_deg for p in flight.photos], dtype=np.float64)
+    used: FloatArray = reported.copy()
+    for k, heading in enumerate(reported.tolist()):
+        want = planned[k] if k < len(planned) else math.nan
+        if not math.isfinite(heading):
+            used[k] = want
+            continue
+        if math.isfinite(want):
+            off = abs((heading - want + 180.0) % 360.0 - 180.0)
+            if off > HEADING_TOLERANCE_DEG:
+                problems.append(
+                    f"photo {k + 1} was taken at heading {heading:.1f} deg, {off:.1f} deg off "
+                    f"the {want:.1f} deg its waypoint turns to (more than "
+                    f"{HEADING_TOLERANCE_DEG:g} deg)"
+                )
+    unknown = ~np.isfinite(used)
+    if unknown.any():
+        problems.append(
+            f"{int(unknown.sum())} photos have no heading, reported or planned: a frame camera's "
+            "photos cannot be judged without one"
+        )
+    if photo_xy.size == 0:
+        return used
+    return grid_bearing_deg(crs, photo_xy, np.where(unknown, 0.0, used))
 
 
 @dataclass(frozen=True, slots=True)
@@ -328,8 +413,18 @@ def judge_set(reports: Sequence[ReplayReport], dem_path: Path, targets_path: Pat
     lo, hi = points.min(axis=0) - TERRAIN_MARGIN_M, points.max(axis=0) + TERRAIN_MARGIN_M
     terrain = read_terrain(info, crs, (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
     ground_t = terrain.sample(target_xy[:, 0], target_xy[:, 1])
+    view = None
+    framed = [r.expected for r in reports if r.expected.frame is not None]
+    if framed:
+        # Each photo at the heading it reported (one without is held by none).
+        reported = np.array([p.heading_deg for _, p in photos], dtype=np.float64)
+        grid = grid_bearing_deg(crs, photo_xy, np.nan_to_num(reported)) if photos else reported
+        assert framed[0].frame is not None
+        view = _FrameView(
+            framed[0].frame, framed[0].gsd_cm, np.where(np.isfinite(reported), grid, np.nan)
+        )
     rows = _targets_seen(
-        terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan
+        terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan, view
     )
     named = []
     for row in rows:
@@ -354,6 +449,7 @@ def _targets_seen(
     photo_xy: FloatArray,
     eye_z: FloatArray,
     tan: float | FloatArray,
+    view: _FrameView | None = None,
 ) -> tuple[TargetSeen, ...]:
     rows = []
     for i, name in enumerate(names):
@@ -365,7 +461,12 @@ def _targets_seen(
             continue
         offset = np.hypot(photo_xy[:, 0] - target_xy[i, 0], photo_xy[:, 1] - target_xy[i, 1])
         cone = (eye_z - ground_t[i]) * tan
-        inside = np.flatnonzero(offset <= cone + CONE_TOLERANCE_M)
+        held = offset <= cone + CONE_TOLERANCE_M
+        if view is not None:
+            every = np.arange(len(photo_xy))
+            dx, dy = target_xy[i, 0] - photo_xy[:, 0], target_xy[i, 1] - photo_xy[:, 1]
+            held = view.holds(every, dx, dy, eye_z - ground_t[i])
+        inside = np.flatnonzero(held)
         clear = np.zeros(0, dtype=bool)
         if inside.size:
             eyes = np.column_stack([photo_xy[inside], eye_z[inside]])
@@ -382,6 +483,8 @@ def _targets_seen(
             else f"nearest photo {nearest + 1} is {offset[nearest] - cone[nearest]:.1f} m "
             "outside its camera cone"
         )
+        if view is not None and not inside.size:
+            reason = f"no photo holds it in its frame (nearest: photo {nearest + 1})"
         rows.append(TargetSeen(name, None, None, reason))
     return tuple(rows)
 
@@ -443,8 +546,17 @@ def report_text(report: ReplayReport) -> str:
 
 def _checks_line(report: ReplayReport) -> str:
     expected = report.expected
+    camera = f"camera ±{expected.fov_deg:g}°"
+    if expected.frame is not None:
+        f = expected.frame
+        camera = (
+            f"frame {f.sensor_w_mm:g}x{f.sensor_h_mm:g} mm / {f.focal_mm:g} mm at each "
+            "photo's heading"
+        )
+        if expected.gsd_cm is not None:
+            camera += f", GSD {expected.gsd_cm:g} cm"
     return (
-        f"{len(report.targets)} targets at camera ±{expected.fov_deg:g}°, clearance "
+        f"{len(report.targets)} targets at {camera}, clearance "
         f"{expected.min_clearance_m:g} m (from {expected.source})"
     )
 

@@ -92,6 +92,9 @@ class Vehicle:
         self.landed_for_s = 0.0
         self.speed_m_s: float | None = None
         self.photos: list[Photo] = []
+        # Heading, degrees clockwise from north; turned by CONDITION_YAW (at once: the turn
+        # itself is not simulated).
+        self.heading_deg = 0.0
         self.events: list[Event] = []
         self.current_seq = 0
         self._resume_seq: int | None = None
@@ -261,7 +264,9 @@ class Vehicle:
     def take_photo(self) -> None:
         """Record a photo here and queue its CAMERA_FEEDBACK."""
         lat, lon = self.position_e7
-        photo = Photo(len(self.photos) + 1, self.time_s, lat, lon, self.amsl_m, self.alt_m)
+        photo = Photo(
+            len(self.photos) + 1, self.time_s, lat, lon, self.amsl_m, self.alt_m, self.heading_deg
+        )
         self.photos.append(photo)
         self.events.append(PhotoTaken(photo))
 

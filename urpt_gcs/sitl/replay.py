@@ -154,6 +154,8 @@ class PhotoFix:
     lon_deg: float
     alt_rel_m: float
     time_s: float
+    # The vehicle's heading CAMERA_FEEDBACK reported (yaw, degrees); NaN where none came.
+    heading_deg: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
@@ -320,6 +322,7 @@ class _Watch:
                 fields["lng"] * 1e-7,
                 float(fields["alt_rel"]),
                 fields["time_usec"] / 1e6,
+                float(fields.get("yaw", math.nan)) % 360.0,
             )
         )
 

@@ -255,7 +255,7 @@ class SitlServer:
         photo = event.photo
         return mav.camera_feedback_encode(
             int(photo.time_s * 1e6), 0, 0, photo.index, photo.lat_e7, photo.lon_e7,
-            photo.alt_amsl_m, photo.alt_rel_m, 0.0, -90.0, 0.0, 0.0,
+            photo.alt_amsl_m, photo.alt_rel_m, 0.0, -90.0, photo.heading_deg, 0.0,
             mavlink.CAMERA_FEEDBACK_PHOTO, photo.index,
         )  # fmt: skip
 

@@ -14,7 +14,8 @@ mission uses, so a read-back here differs from the upload exactly where ArduPilo
 * NaN is refused in params 1-4, except param4 of NAV_WAYPOINT, NAV_TAKEOFF and NAV_LAND;
 * NAV_WAYPOINT / NAV_TAKEOFF keep param1 as a whole number (uint16), drop params 2-4;
   DO_MOUNT_CONTROL keeps params 1-3; DO_CHANGE_SPEED param1 as a byte and params 2-3;
-  DO_DIGICAM_CONTROL keeps params 1-4 and x, y as bytes;
+  DO_DIGICAM_CONTROL keeps params 1-4 and x, y as bytes; CONDITION_YAW keeps params 1-2,
+  param3 as a signed and param4 as an unsigned byte;
 * ``current`` always reads 0, ``autocontinue`` always 1.
 
 In PX4 mode there is no home item, and items are kept as PX4 v1.16 SITL was seen to keep
@@ -145,6 +146,8 @@ _PARAM_STORAGE: dict[int, tuple[ParamStore, ParamStore, ParamStore, ParamStore]]
     mavlink.MAV_CMD_DO_CHANGE_SPEED: (lambda v: _uint(v, 8), _keep, _keep, _zero),
     mavlink.MAV_CMD_DO_SET_ROI: (lambda v: _uint(v, 16), _zero, _zero, _zero),
     mavlink.MAV_CMD_CONDITION_DELAY: (_keep, _zero, _zero, _zero),
+    # Yaw_Command: angle_deg and turn_rate_dps float, direction int8_t, relative_angle uint8_t.
+    mavlink.MAV_CMD_CONDITION_YAW: (_keep, _keep, _int8, lambda v: _uint(v, 8)),
     mavlink.MAV_CMD_DO_MOUNT_CONTROL: (_keep, _keep, _keep, _zero),
     mavlink.MAV_CMD_DO_DIGICAM_CONTROL: (
         lambda v: _uint(v, 8),

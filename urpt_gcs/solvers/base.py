@@ -46,6 +46,7 @@ class Tour:
     ``t``, checked on the terrain for placed stops. ``lower_bound`` is a proven lower bound on
     any tour that sees every target (for a planning instance: from anywhere on the flight
     plane); ``proven_optimal`` says no tour over the instance's viewpoints is shorter.
+    ``headings_deg`` is each stop's heading when the camera is a frame (None for the cone).
     """
 
     order: tuple[int, ...]
@@ -57,6 +58,7 @@ class Tour:
     points_xy: FloatArray | None
     sees: BoolArray
     notes: tuple[str, ...] = field(default=())
+    headings_deg: FloatArray | None = None
 
     @property
     def gap(self) -> float:
@@ -165,6 +167,7 @@ def finish_tour(
         points_xy=None if instance.points_xy is None else instance.points_xy[idx],
         sees=instance.covers.dense(idx),
         notes=notes,
+        headings_deg=None if instance.heading_deg is None else instance.heading_deg[idx],
     )
 
 
