@@ -83,6 +83,47 @@ fov = [25, 35]
     assert jobs[2].settings.samples == 36  # the plan default, not the other site's
 
 
+def test_frame_cameras_in_a_jobs_file_are_the_plan_command_s(tmp_path: Path) -> None:
+    """A camera table may name a preset or a sensor, lens and image with headings and a GSD;
+    each job's frame is the one `urpt-gcs plan` makes of the same flags."""
+    jobs_file = _write(
+        tmp_path / "jobs.toml",
+        """
+[cameras.wide]
+fov = 40
+[cameras.p4]
+camera = "phantom4rtk"
+gsd = 2.5
+headings = 2
+[cameras.own]
+sensor = "17.3x13"
+focal = 12.29
+image = "5280x3956"
+
+[[site]]
+name = "q"
+dem = "d.tif"
+targets = "t.kml"
+fov = 20
+[site.sweep]
+camera = ["wide", "p4", "own"]
+""",
+    )
+    wide, p4, own = read_jobs(jobs_file, tmp_path / "out")
+    assert (wide.settings.frame, wide.settings.fov_deg) == (None, 40.0)
+
+    from urpt_gcs.camera import frame_from_flags
+
+    assert p4.settings.frame == frame_from_flags("phantom4rtk", None, None, None)
+    assert (p4.settings.gsd_cm, p4.settings.headings) == (2.5, 2)
+    assert own.settings.frame == frame_from_flags(None, "17.3x13", 12.29, "5280x3956")
+    assert own.settings.gsd_cm is None and own.settings.frame is not None
+    assert [j.name for j in (wide, p4, own)] == ["q-wide", "q-p4", "q-own"]
+    both = _write(tmp_path / "both.toml", SITE + 'camera = "mavic3e"\nfov = 30\n')
+    with pytest.raises(JobsFileError, match=r"both.toml: \[\[site\]\] 'a'.*give one"):
+        read_jobs(both, tmp_path / "out2")
+
+
 def test_defaults_are_those_of_the_plan_command() -> None:
     context = click.Context(plan_command)
     flags = {

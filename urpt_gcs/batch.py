@@ -6,10 +6,11 @@ A jobs file is TOML::
     time-limit = 5
     no-map = true
 
-    [cameras.wide]               # optional: named cameras, for a camera sweep
-    fov = 40
-    [cameras.narrow]
-    fov = 20
+    [cameras.wide]               # optional: named cameras, for a camera sweep: a cone
+    fov = 40                     # (fov), or a frame camera as `plan` takes it (camera =
+    [cameras.p4]                 # a preset, or sensor/focal/image), with headings and gsd
+    camera = "phantom4rtk"
+    gsd = 2.0
 
     [[site]]
     name = "quarry"              # the job's folder under --out
@@ -17,8 +18,8 @@ A jobs file is TOML::
     targets = "quarry/targets.kml"
     fov = 35                     # any `urpt-gcs plan` option, named as its flag
     [site.sweep]                 # optional: one plan per combination of values
-    altitude = [80, 100]         # quarry-alt80-wide, quarry-alt80-narrow, quarry-alt100-wide...
-    camera = ["wide", "narrow"]  # (or fov = [25, 30]: quarry-alt80-fov25, ...)
+    altitude = [80, 100]         # quarry-alt80-wide, quarry-alt80-p4, quarry-alt100-wide...
+    camera = ["wide", "p4"]      # (or fov = [25, 30]: quarry-alt80-fov25, ...)
 
 Each job is planned where it runs (:func:`run_job`: the DEM window is read there) and its
 files are rendered there; this process commits each job's folder ``OUT/NAME`` all or none,
@@ -39,9 +40,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from urpt_gcs.camera import frame_from_flags
 from urpt_gcs.cluster import Done, probe_workers, run_jobs
 from urpt_gcs.errors import ClusterError, JobsFileError, SettingsError, UrptError
 from urpt_gcs.output import check_folder, commit
+from urpt_gcs.visibility import DEFAULT_HEADINGS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -54,6 +57,8 @@ if TYPE_CHECKING:
     from urpt_gcs.planner import PlanSettings
 
 RESULTS_FILE = "batch.csv"
+# The cone camera's half-angle when a job names no camera at all, as `plan` takes it.
+_CONE_FOV_DEG = 30.0
 # Threads a job's line-of-sight tests use unless its site says otherwise: a worker is one
 # process of one thread, and its neighbours have the other cores.
 JOB_THREADS = 1
@@ -64,6 +69,12 @@ PLAN_KEYS: dict[str, str] = {
     "band": _INTEGER,
     "workers": _INTEGER,
     "fov": _NUMBER,
+    "camera": _TEXT,
+    "sensor": _TEXT,
+    "focal": _NUMBER,
+    "image": _TEXT,
+    "headings": _INTEGER,
+    "gsd": _NUMBER,
     "samples": _INTEGER,
     "altitude": _NUMBER,
     "clearance": _NUMBER,
@@ -81,7 +92,9 @@ PLAN_KEYS: dict[str, str] = {
     "time-limit": _NUMBER,
     "seed": _INTEGER,
 }
-CAMERA_KEYS = {"fov": _NUMBER}
+CAMERA_KEYS = {
+    key: PLAN_KEYS[key] for key in ("fov", "camera", "sensor", "focal", "image", "headings", "gsd")
+}
 SITE_KEYS = {"name", "dem", "targets", "sweep"}
 SWEEP_KEYS = ("altitude", "camera", "fov")  # in the order their labels join a job's name
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
@@ -313,6 +326,8 @@ def _site_jobs(
         for key, value in combination:
             labels[key] = _label(value)
             if key == "camera":
+                # A named camera replaces whatever camera the site or [plan] described.
+                chosen = {k: v for k, v in chosen.items() if k not in CAMERA_KEYS}
                 chosen.update(cameras[value])
                 suffix += f"-{value}"
             else:
@@ -358,7 +373,13 @@ def _label(value: object) -> str:
 PLAN_DEFAULTS: dict[str, Any] = {
     "band": None,
     "workers": JOB_THREADS,
-    "fov": 30.0,
+    "fov": None,
+    "camera": None,
+    "sensor": None,
+    "focal": None,
+    "image": None,
+    "headings": DEFAULT_HEADINGS,
+    "gsd": None,
     "samples": 36,
     "altitude": None,
     "clearance": 30.0,
@@ -393,8 +414,16 @@ def plan_settings(options: Mapping[str, Any]) -> PlanSettings:
 
     o = {**PLAN_DEFAULTS, **options}
     number = {k: float(v) for k, v in o.items() if PLAN_KEYS[k] == _NUMBER and v is not None}
+    frame = frame_from_flags(o["camera"], o["sensor"], number.get("focal"), o["image"])
+    if frame is not None and "fov" in number:
+        raise SettingsError(
+            "fov is the cone camera's half-angle and camera/sensor a frame camera: give one"
+        )
     return PlanSettings(
-        fov_deg=number["fov"],
+        fov_deg=number.get("fov", _CONE_FOV_DEG),
+        frame=frame,
+        gsd_cm=number.get("gsd"),
+        headings=o["headings"],
         samples=o["samples"],
         altitude_m=number.get("altitude"),
         clearance_m=number["clearance"],
@@ -589,7 +618,7 @@ def _row(
         site=job.site,
         status=status or ("ok" if ok else "failed"),
         altitude_m=data.get("altitude_amsl_m", job.settings.altitude_m),
-        fov_deg=job.settings.fov_deg,
+        fov_deg=None if job.settings.frame is not None else job.settings.fov_deg,
         camera=job.sweep.get("camera", ""),
         samples=job.settings.samples,
         solver=data.get("solver", job.settings.solver),
