@@ -28,18 +28,24 @@ def _terrain(z: np.ndarray, cell: float = 10.0) -> Terrain:
     )
 
 
-def _bilinear(terrain: Terrain, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The surface written out directly: edge values repeated half a cell past the outermost
-    centres, unknown where a corner that carries weight is nodata or outside the raster."""
+def _padded_px(terrain: Terrain, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(col, row) of points on the padded grid, whose centres are at whole numbers."""
+    col = (x - 500_000.0) / terrain.cell_m + 0.5
+    row = (5_200_000.0 - y) / terrain.cell_m + 0.5
+    return col, row
+
+
+def _bilinear(terrain: Terrain, col: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """The surface written out directly at padded-grid (col, row): edge values repeated half
+    a cell past the outermost centres, unknown where a corner that carries weight is nodata or
+    outside the raster."""
     rows, cols = terrain.elevation_m.shape
     z = np.pad(terrain.elevation_m, 1, mode="edge")
-    col = (x - 500_000.0) / terrain.cell_m + 0.5  # centres of the padded grid at integers
-    row = (5_200_000.0 - y) / terrain.cell_m + 0.5
     inside = (col >= 0.5) & (col <= cols + 0.5) & (row >= 0.5) & (row <= rows + 0.5)
     c0 = np.clip(np.floor(col), 0, cols).astype(int)
     r0 = np.clip(np.floor(row), 0, rows).astype(int)
     fc, fr = col - c0, row - r0
-    total = np.zeros_like(x)
+    total = np.zeros_like(col)
     unknown = ~inside
     for dr, dc, w in (
         (0, 0, (1 - fr) * (1 - fc)),
@@ -58,7 +64,10 @@ def _brute(terrain: Terrain, a: np.ndarray, b: np.ndarray) -> tuple[float, float
     """Largest terrain height above the segment, and the share of samples over no data."""
     t = np.linspace(0.0, 1.0, DENSE)
     p = a[None, :] + (b - a)[None, :] * t[:, None]
-    z = _bilinear(terrain, p[:, 0], p[:, 1])
+    # Samples placed in pixel coordinates: in metres, a point a hair off the raster's edge
+    # (5.2e6 m north) rounds onto it and would count as known ground.
+    (ca, cb), (ra, rb) = _padded_px(terrain, np.array([a[0], b[0]]), np.array([a[1], b[1]]))
+    z = _bilinear(terrain, ca + (cb - ca) * t, ra + (rb - ra) * t)
     known = np.isfinite(z)
     excess = float(np.max(z[known] - p[known, 2])) if known.any() else -math.inf
     return excess, float((~known).mean())

@@ -452,6 +452,10 @@ RETRYABLE = frozenset(
         "MAV_MISSION_DENIED",  # another ground station is uploading
         "MAV_MISSION_OPERATION_CANCELLED",  # the vehicle gave up waiting for an item
         "MAV_MISSION_INVALID_SEQUENCE",  # an item arrived twice or late
+        # A transfer that lost its state: MAVSDK's protocol error, and PX4's answer to an item
+        # that arrives after its transfer timed out or while another is busy (an item PX4
+        # cannot take gets a code of its own).
+        "MAV_MISSION_ERROR",
     }
 )
 
