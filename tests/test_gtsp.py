@@ -20,6 +20,19 @@ from urpt_gcs.terrain import Terrain
 from urpt_gcs.visibility import Camera
 
 
+def _half_metre_grid(z: np.ndarray) -> Terrain:
+    """``z`` on 0.5 m cells, its north-west corner at (0, rows / 2) in UTM 32N."""
+    rows, cols = z.shape
+    return Terrain(
+        elevation_m=z,
+        transform=Affine(0.5, 0.0, 0.0, 0.0, -0.5, rows / 2.0),
+        crs=pyproj.CRS.from_epsg(32632),
+        source="random",
+        read_window_px=(0, 0, cols, rows),
+        source_shape_px=(rows, cols),
+    )
+
+
 @pytest.mark.parametrize("n", [0, 1, 7, 3000])
 def test_euclidean_matrix_in_blocks_equals_the_dense_formula(n: int) -> None:
     xy = np.random.default_rng(n).uniform(-1e4, 1e4, (n, 2))
@@ -49,14 +62,7 @@ def test_cover_sets_on_threads_equal_the_serial_ones() -> None:
     z = 100.0 + 8.0 * rng.random((300, 300))
     z[100:110, :] = 140.0
     z[200:205, 50:60] = np.nan
-    terrain = Terrain(
-        elevation_m=z,
-        transform=Affine(0.5, 0.0, 0.0, 0.0, -0.5, 150.0),
-        crs=pyproj.CRS.from_epsg(32632),
-        source="random",
-        read_window_px=(0, 0, 300, 300),
-        source_shape_px=(300, 300),
-    )
+    terrain = _half_metre_grid(z)
     targets = rng.uniform(10.0, 140.0, (60, 2))
     ground = terrain.sample(targets[:, 0], targets[:, 1])
     keep = np.isfinite(ground)
@@ -147,14 +153,7 @@ def test_cover_pairs_in_chunks_are_every_pair_in_sight_and_refuse_over_budget(
     rng = np.random.default_rng(8)
     z = 100.0 + 6.0 * rng.random((200, 200))
     z[90:95, :] = 135.0
-    terrain = Terrain(
-        elevation_m=z,
-        transform=Affine(0.5, 0.0, 0.0, 0.0, -0.5, 100.0),
-        crs=pyproj.CRS.from_epsg(32632),
-        source="random",
-        read_window_px=(0, 0, 200, 200),
-        source_shape_px=(200, 200),
-    )
+    terrain = _half_metre_grid(z)
     targets = rng.uniform(10.0, 90.0, (25, 2))
     ground = terrain.sample(targets[:, 0], targets[:, 1])
     viewpoints = rng.uniform(0.0, 100.0, (700, 2))

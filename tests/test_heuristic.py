@@ -358,7 +358,8 @@ def test_local_search_in_slices_reaches_the_same_tour(budget: int) -> None:
     whole = first.copy()
     w, q = scratch()
     moves = ls.SYMMETRIC | ls.TWO_OPT | ls.OR_OPT
-    want = lns.improve(p.kernel_args, whole, m, moves, w, q)
+    lns.queue_all(p.kernel_args, whole, m, w, q)
+    want = ls.local_search(p.kernel_args, whole, m, moves, w, q)
     sliced = first.copy()
     w, q = scratch()
     lns.queue_all(p.kernel_args, sliced, m, w, q)

@@ -179,13 +179,6 @@ def rebuild(P, t, m, moves, W, Q, rng):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def improve(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
-    """Local search on the whole of the tour ``t[:m]``; its cost."""
-    queue_all(P, t, m, W, Q)
-    return local_search(P, t, m, moves, W, Q)
-
-
-@njit(cache=True)
 def queue_all(P, t, m, W, Q):  # type: ignore[no-untyped-def]
     """Queue every cluster of ``t[:m]`` for the local search."""
     cl = P[4]
