@@ -593,23 +593,37 @@ async def upload_async(
 
     say(f"waiting for an autopilot on {url}")
     async with connect(url, settings.timeout_s) as link:
-        report = await upload_verified(link, mission, settings, progress)
-        if fence is None or fence.empty:
-            return report
-        try:
-            verified = await upload_fence_verified(
-                link, fence, mission.firmware, settings, progress
-            )
-        except FenceRefused as exc:
-            return replace(
-                report,
-                warnings=(
-                    *report.warnings,
-                    f"the vehicle refused the geofence ({exc.result}): it flies the mission "
-                    "without the plan's fence; set one on the vehicle if it needs one",
-                ),
-            )
-        return replace(report, fence=verified)
+        return await upload_with_fence(link, mission, settings, progress, fence)
+
+
+class MissionAndFenceLink(VehicleLink, FenceLink, Protocol):
+    """A vehicle that takes missions and fences."""
+
+
+async def upload_with_fence(
+    link: MissionAndFenceLink,
+    mission: Mission,
+    settings: UploadSettings,
+    progress: Progress | None = None,
+    fence: Geofence | None = None,
+) -> UploadReport:
+    """The verified upload of the mission, then of the fence if there is one, on a vehicle
+    already connected; a vehicle that keeps no fences gets a warning instead."""
+    report = await upload_verified(link, mission, settings, progress)
+    if fence is None or fence.empty:
+        return report
+    try:
+        verified = await upload_fence_verified(link, fence, mission.firmware, settings, progress)
+    except FenceRefused as exc:
+        return replace(
+            report,
+            warnings=(
+                *report.warnings,
+                f"the vehicle refused the geofence ({exc.result}): it flies the mission "
+                "without the plan's fence; set one on the vehicle if it needs one",
+            ),
+        )
+    return replace(report, fence=verified)
 
 
 def upload(

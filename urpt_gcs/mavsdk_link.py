@@ -359,3 +359,58 @@ async def connect(url: str = DEFAULT_URL, timeout_s: float = 10.0) -> AsyncItera
         finally:
             link.mission.destroy()
             link.direct.destroy()
+
+
+@asynccontextmanager
+async def connect_systems(
+    url: str, system_ids: Sequence[int], timeout_s: float = 10.0
+) -> AsyncIterator[dict[int, MavsdkLink]]:
+    """Connect to several autopilots on one link, by their MAVLink system ids.
+
+    One MAVSDK instance hears every system on the connection (``Mavsdk.get_systems``); each
+    gets its own plugins, which address it by its id. The links share MAVSDK's transfer
+    timeout, so transfers on them should run one at a time.
+
+    Raises
+    ------
+    LinkError
+        If the connection cannot be opened or a system id is not heard within ``timeout_s``.
+    """
+    _route_mavsdk_logs()
+    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    async with Mavsdk(config) as sdk:
+        try:
+            await sdk.add_any_connection(url)
+        except MavsdkError as exc:
+            raise LinkError(
+                f"cannot open {url!r} ({exc}): use e.g. udpin://0.0.0.0:14550, "
+                "tcpout://127.0.0.1:5760 or serial:///dev/ttyACM0:57600"
+            ) from None
+        wanted = set(system_ids)
+        found: dict[int, Any] = {}
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for system in await sdk.get_systems():
+                sysid = await system.get_system_id()
+                if sysid in wanted and await system.has_autopilot():
+                    found.setdefault(sysid, system)
+            if len(found) == len(wanted) or time.monotonic() > deadline:
+                break
+            await asyncio.sleep(0.1)
+        missing = sorted(wanted - set(found))
+        if missing:
+            heard = sorted(found) or "none"
+            raise LinkError(
+                f"no autopilot with system id {', '.join(map(str, missing))} heard on {url} "
+                f"within {timeout_s:g} s (heard: {heard}): check each vehicle's SYSID_THISMAV "
+                "and that all of them reach this link"
+            )
+        links = {
+            sysid: MavsdkLink(sdk, found[sysid], f"{url} (system {sysid})") for sysid in system_ids
+        }
+        try:
+            yield links
+        finally:
+            for link in links.values():
+                link.mission.destroy()
+                link.direct.destroy()

@@ -4,23 +4,49 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from urpt_gcs.cli._root import fail, main, terminal_progress, upload_and_report
-from urpt_gcs.errors import UrptError
+from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.link import DEFAULT_URL
+
+if TYPE_CHECKING:
+    from urpt_gcs.sitl.replay import ReplaySettings
 
 
 @main.command("upload")
-@click.argument("mission_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.argument("mission_file", metavar="PLAN", required=False, type=click.Path(path_type=Path))
 @click.option(
     "--connect",
-    default=DEFAULT_URL,
+    "connects",
+    multiple=True,
+    help="MAVSDK connection string (udpin://, udpout://, tcpout://, serial://) "
+    f"[default: {DEFAULT_URL}]; with --fleet, one per vehicle in vehicle order.",
+)
+@click.option(
+    "--fleet",
+    "fleet_dir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Upload every vehicle's mission of a fleet plan (the --out folder of plan --vehicles).",
+)
+@click.option(
+    "--sysid",
+    default=None,
+    metavar="ID,ID,...",
+    help="With --fleet: the vehicles' MAVLink system ids on the one --connect link.",
+)
+@click.option(
+    "--sortie",
+    type=int,
+    default=1,
     show_default=True,
-    help="MAVSDK connection string (udpin://, udpout://, tcpout://, serial://).",
+    help="With --fleet: the sortie to upload to a vehicle that has several.",
 )
 @click.option(
     "--retries",
@@ -36,20 +62,79 @@ from urpt_gcs.link import DEFAULT_URL
     show_default=True,
     help="Seconds to wait for the autopilot's heartbeat.",
 )
-def upload_command(mission_file: Path, connect: str, retries: int, timeout: float) -> None:
+def upload_command(
+    mission_file: Path | None,
+    connects: tuple[str, ...],
+    fleet_dir: Path | None,
+    sysid: str | None,
+    sortie: int,
+    retries: int,
+    timeout: float,
+) -> None:
     """Upload a .plan (or .waypoints, as ArduPilot) and verify the vehicle reads it back.
 
     A .plan's geofence goes up after the mission, as a fence mission, and is read back too.
+    With --fleet, each vehicle of a fleet plan gets its own mission, verified on its own.
     """
     from urpt_gcs.sitl.replay import read_fence, read_mission
 
+    if fleet_dir is not None:
+        if mission_file is not None:
+            fail(SettingsError("give PLAN or --fleet OUT, not both"))
+        _upload_fleet(fleet_dir, connects, sysid, sortie, retries, timeout)
+        return
+    if mission_file is None:
+        fail(SettingsError("no mission given: urpt-gcs upload PLAN, or --fleet OUT"))
+        return
+    if sysid is not None:
+        fail(SettingsError("--sysid names the vehicles of a --fleet upload: add --fleet OUT"))
+    if len(connects) > 1:
+        fail(SettingsError("several --connect are for --fleet: give one for a single mission"))
     try:
         mission = read_mission(mission_file, flag="urpt-gcs upload")
         fence = read_fence(mission_file)
     except UrptError as exc:
         fail(exc)
         return
-    upload_and_report(mission, connect, retries, timeout, quiet=False, fence=fence)
+    url = connects[0] if connects else DEFAULT_URL
+    upload_and_report(mission, url, retries, timeout, quiet=False, fence=fence)
+
+
+def _upload_fleet(
+    folder: Path,
+    connects: tuple[str, ...],
+    sysid: str | None,
+    sortie: int,
+    retries: int,
+    timeout: float,
+) -> None:
+    from urpt_gcs.fleet_folder import read_fleet
+    from urpt_gcs.fleet_upload import parse_system_ids, report_lines, upload_fleet
+    from urpt_gcs.link import UploadSettings
+
+    try:
+        fleet = read_fleet(folder)
+        ids = parse_system_ids(sysid) if sysid is not None else None
+        urls = connects or (DEFAULT_URL,)
+        report = upload_fleet(
+            fleet, urls, ids, UploadSettings(retries, timeout), terminal_progress(), sortie
+        )
+    except UrptError as exc:
+        fail(exc)
+        return
+    for entry in report.vehicles:
+        for warning in entry.report.warnings if entry.report is not None else ():
+            click.echo(f"urpt-gcs: warning: {entry.vehicle.name}: {warning}", err=True)
+    for line in report_lines(report, folder):
+        click.echo(line)
+    if not report.ok:
+        names = ", ".join(v.vehicle.name for v in report.failed)
+        them = "them" if len(report.failed) > 1 else "it"
+        click.echo(
+            f"urpt-gcs: error: {names} not verified: do not fly {them} until uploaded again",
+            err=True,
+        )
+        sys.exit(1)
 
 
 @main.group("sitl", invoke_without_command=True)
@@ -139,11 +224,18 @@ def sitl_group(
 @click.option(
     "--plan",
     "plan_files",
-    required=True,
     multiple=True,
     type=click.Path(path_type=Path),
     help="Mission to fly: .plan or .waypoints, or a plan's --out folder (every sortie); "
     "repeat for several sorties.",
+)
+@click.option(
+    "--fleet",
+    "fleet_dir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Fly every vehicle of a fleet plan at once (the --out folder of plan --vehicles) and "
+    "check their separation.",
 )
 @click.option("--speedup", type=float, default=50.0, show_default=True, help="Simulated s per s.")
 @click.option(
@@ -197,6 +289,7 @@ def sitl_replay_command(
     dem: Path,
     targets: Path,
     plan_files: tuple[Path, ...],
+    fleet_dir: Path | None,
     speedup: float,
     fov: float | None,
     min_clearance: float | None,
@@ -232,6 +325,13 @@ def sitl_replay_command(
             connect=connect,
             ardupilot=binary,
         )
+        if fleet_dir is not None:
+            if plan_files:
+                raise SettingsError("give --plan or --fleet, not both")
+            _replay_fleet(dem, targets, fleet_dir, settings, progress)
+            return
+        if not plan_files:
+            raise SettingsError("no mission given: --plan PLAN (or --fleet OUT for a fleet)")
         files = mission_files(plan_files)
         if len(files) == 1:
             report = replay(dem, targets, files[0], settings, progress)
@@ -251,4 +351,26 @@ def sitl_replay_command(
     if not ok:
         more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
         click.echo(f"urpt-gcs: error: replay failed: {problems[0]}{more}", err=True)
+        sys.exit(1)
+
+
+def _replay_fleet(
+    dem: Path,
+    targets: Path,
+    folder: Path,
+    settings: ReplaySettings,
+    progress: Callable[[str], None] | None,
+) -> None:
+    from urpt_gcs.fleet_folder import read_fleet
+    from urpt_gcs.sitl.fleet import fleet_report_text, replay_fleet
+
+    report = replay_fleet(dem, targets, read_fleet(folder), settings, progress)
+    for warning in (w for r in report.together.reports for w in r.expected.warnings):
+        click.echo(f"urpt-gcs: warning: {warning}", err=True)
+    click.echo(fleet_report_text(report))
+    if not report.ok:
+        problems = [*report.problems, *report.together.problems]
+        problems += [f"{r.plan}: {p}" for r in report.together.reports for p in r.problems]
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        click.echo(f"urpt-gcs: error: fleet replay failed: {problems[0]}{more}", err=True)
         sys.exit(1)

@@ -19,13 +19,14 @@ MAV_CMD_MISSION_START and takes the photos from CAMERA_IMAGE_CAPTURED.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import json
 import math
 import re
 import socket
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -73,6 +74,8 @@ ARMING_TEXT_PREFIXES = ("PreArm:", "Arm:")
 # SIH keeps time at 20x, but on 2 cores some CAMERA_IMAGE_CAPTURED never reached MAVSDK;
 # at 15x none was lost in three demo flights.
 PX4_MAX_SPEEDUP = 15.0
+# How long a vehicle may take to send its first SYS_STATUS before it is armed regardless.
+STATUS_WAIT_S = 3.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -160,12 +163,17 @@ class PhotoFix:
 
 @dataclass(frozen=True, slots=True)
 class TrackPoint:
-    """A position as GLOBAL_POSITION_INT reported it (time in simulated seconds)."""
+    """A position as GLOBAL_POSITION_INT reported it (time in simulated seconds).
+
+    ``wall_s`` is the ground station's monotonic clock when it arrived, one clock for every
+    vehicle of a fleet.
+    """
 
     time_s: float
     lat_deg: float
     lon_deg: float
     alt_rel_m: float
+    wall_s: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
@@ -290,6 +298,8 @@ class _Watch:
         self.disarmed_at_s: float | None = None
         self.disarmed_at_wall: float | None = None
         self.disarmed = asyncio.Event()
+        # SYS_STATUS's pre-arm bit: None until a vehicle that reports it has spoken.
+        self.armable: bool | None = None
         self._arm_unclocked = False
         self._tasks: list[asyncio.Task[None]] = []
 
@@ -308,6 +318,7 @@ class _Watch:
             fields["lat"] * 1e-7,
             fields["lon"] * 1e-7,
             fields["relative_alt"] / 1000.0,
+            time.monotonic(),
         )
         self.track.append(point)
         if self._arm_unclocked:
@@ -352,6 +363,11 @@ class _Watch:
             self.disarmed.set()
         self.armed = armed
 
+    def _status(self, fields: dict[str, Any]) -> None:
+        bit = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+        if int(fields["onboard_control_sensors_present"]) & bit:
+            self.armable = bool(int(fields["onboard_control_sensors_health"]) & bit)
+
     def arming_words(self) -> str:
         """The vehicle's last words on arming, or ''."""
         said = [t for t in self.texts if t.startswith(ARMING_TEXT_PREFIXES)]
@@ -366,6 +382,7 @@ class _Watch:
             photos or ("CAMERA_FEEDBACK", self._photo),
             ("STATUSTEXT", self._text),
             ("HEARTBEAT", self._heartbeat),
+            ("SYS_STATUS", self._status),
         ):
             self._tasks.append(asyncio.create_task(self._follow(name, handle)))
         await asyncio.sleep(0)
@@ -417,7 +434,10 @@ async def _fly(
     timeout_s: float,
     say: Progress,
     where: str,
+    before_arming: Callable[[], Awaitable[None]] | None = None,
 ) -> Flight:
+    """Upload, arm and fly; ``before_arming``, if given, is awaited once the vehicle is
+    ready to arm (a fleet's vehicles wait there for each other)."""
     upload = await upload_verified(link, mission, UploadSettings(), say)
     vehicle = await identify(link, where)
     param, telemetry, action = (
@@ -431,9 +451,9 @@ async def _fly(
     try:
         await telemetry.set_rate_position(settings.position_rate_hz)
         if mission.firmware == "px4":
-            await _start_px4(link, system_id, param, action, mission, say)
+            await _start_px4(link, system_id, param, action, mission, say, before_arming)
         else:
-            await _start_ardupilot(link, param, action, watch, settings, say)
+            await _start_ardupilot(link, param, action, watch, settings, say, before_arming)
         await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
     except asyncio.TimeoutError:
         raise LinkError(
@@ -461,10 +481,14 @@ async def _start_ardupilot(
     watch: _Watch,
     settings: ReplaySettings,
     say: Progress,
+    before_arming: Callable[[], Awaitable[None]] | None = None,
 ) -> None:
     """Arm in GUIDED and start AUTO, taking off as ``settings.takeoff`` says."""
     if settings.takeoff == "auto-options":
         await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
+    if before_arming is not None:
+        await _until_armable(link, watch, ARM_WAIT_S)
+        await before_arming()
     say("arming")
     await _arm_when_ready(link, action, watch, ARM_WAIT_S)
     if settings.takeoff == "guided":
@@ -483,11 +507,14 @@ async def _start_px4(
     action: ActionAsync,
     mission: Mission,
     say: Progress,
+    before_arming: Callable[[], Awaitable[None]] | None = None,
 ) -> None:
     """Arm and MAV_CMD_MISSION_START: PX4 then takes off and flies the mission in AUTO."""
     # MPC_XY_CRUISE is the speed PX4 flies between waypoints until the mission's own speed
     # item applies; the plan's timing assumes that speed.
     await param.set_param_float("MPC_XY_CRUISE", float(mission.cruise_speed_m_s))
+    if before_arming is not None:
+        await before_arming()
     say("arming")
     await _arm_retrying(action, ARM_WAIT_S)
     say("flying the mission (MAV_CMD_MISSION_START)")
@@ -519,6 +546,24 @@ async def _command(link: MavsdkLink, system_id: int, command: int) -> None:
         entry = mavlink.enums["MAV_RESULT"].get(result) if result is not None else None
         name = entry.name if entry is not None else "no answer"
         raise LinkError(f"the vehicle did not accept {command_name(command)}: {name}")
+
+
+async def _until_armable(link: MavsdkLink, watch: _Watch, wait_s: float) -> None:
+    """Wait until SYS_STATUS says the pre-arm checks pass (at most ``wait_s``); a vehicle that
+    does not report them is not waited for."""
+    system_id = await link.system.get_system_id()
+    interval_us = 200_000.0
+    with contextlib.suppress(MavsdkError):
+        await _send_command(
+            link, system_id, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+            mavlink.MAVLINK_MSG_ID_SYS_STATUS, interval_us,
+        )  # fmt: skip
+    deadline = time.monotonic() + wait_s
+    first_word = time.monotonic() + STATUS_WAIT_S
+    while not watch.armable and time.monotonic() < deadline:
+        if watch.armable is None and time.monotonic() > first_word:
+            return
+        await asyncio.sleep(0.05)
 
 
 async def _arm_retrying(action: ActionAsync, wait_s: float) -> None:

@@ -35,6 +35,8 @@ SENSORS = (
     | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
     | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
     | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    # As ArduPilot reports its pre-arm checks passing (AP_Notify's pre_arm_check).
+    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
 )
 # PX4 custom mode: main mode in bits 16-23, sub mode in bits 24-31 (AUTO.LOITER).
 PX4_AUTO_LOITER = (4 << 16) | (3 << 24)
