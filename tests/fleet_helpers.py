@@ -17,7 +17,7 @@ from click.testing import CliRunner
 from conftest import DEMO
 
 from urpt_gcs.cli import main
-from urpt_gcs.targets import read_targets
+from urpt_gcs.targets import Target, read_targets
 
 SITE, TARGETS = DEMO / "site.tif", DEMO / "targets.kml"
 HOME = (47.688761595, 9.423090709)
@@ -35,18 +35,18 @@ class Vehicle:
 def build_fleet(
     out: Path, vehicles: list[Vehicle], mode: str = "altitude", min_m: float = 10.0
 ) -> Path:
-    """Plan each vehicle into ``out/vehicle_k`` and write the fleet summary."""
+    """Plan each vehicle into ``out/vehicle_k`` and write the fleet summary, and every
+    vehicle's targets together in ``out/targets.csv``."""
     every = read_targets(TARGETS).targets
     rows = []
+    planned: list[Target] = []
     for number, vehicle in enumerate(vehicles, start=1):
         chosen = [t for t in every if t.name.split()[0] in vehicle.targets]
         assert len(chosen) == len(vehicle.targets)
+        planned += chosen
         subset = out / f"targets_{number}.csv"
         out.mkdir(parents=True, exist_ok=True)
-        with subset.open("w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(["name", "lat", "lon"])
-            writer.writerows([t.name, f"{t.lat_deg:.9f}", f"{t.lon_deg:.9f}"] for t in chosen)
+        _write_targets(subset, chosen)
         folder = f"vehicle_{number}"
         args = [
             "plan", "--dem", str(SITE), "--targets", str(subset), "--out", str(out / folder),
@@ -85,4 +85,12 @@ def build_fleet(
         },
     }
     (out / "summary.json").write_text(json.dumps({"fleet": block}, indent=2))
+    _write_targets(out / "targets.csv", planned)
     return out
+
+
+def _write_targets(path: Path, targets: list[Target]) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["name", "lat", "lon"])
+        writer.writerows([t.name, f"{t.lat_deg:.9f}", f"{t.lon_deg:.9f}"] for t in targets)

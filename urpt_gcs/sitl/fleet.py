@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 import pyproj
-from scipy.ndimage import minimum_filter1d
+from scipy.ndimage import minimum_filter1d, uniform_filter1d
 
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.fleet_folder import FleetFolder, FleetVehicle, Separation
@@ -64,8 +64,8 @@ _ECEF = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
 class Approach:
     """The closest two vehicles came at equal times.
 
-    ``time_s`` is in the vehicles' simulated seconds after the first take-off; ``lat_deg``,
-    ``lon_deg`` the midpoint between them.
+    ``time_s`` is on the first vehicle of ``pair``'s own clock, seconds after its take-off;
+    ``lat_deg``, ``lon_deg`` the midpoint between them.
     """
 
     pair: tuple[int, int]
@@ -86,7 +86,7 @@ class FleetReport:
     separation: Separation
     required_m: float
     approach: Approach | None
-    takeoff_s: tuple[float, ...]
+    takeoff_wall_s: tuple[float, ...]
     wall_time_s: float
     problems: tuple[str, ...]
 
@@ -220,6 +220,7 @@ class _Track:
     lat_deg: FloatArray
     lon_deg: FloatArray
     amsl_m: FloatArray
+    own_s: FloatArray  # the vehicle's own clock
 
     def at(self, field: FloatArray, t: FloatArray | float) -> FloatArray:
         return np.asarray(np.interp(t, self.time_s, field), dtype=np.float64)
@@ -228,46 +229,69 @@ class _Track:
         return np.column_stack([self.at(self.ecef[:, k], t) for k in range(3)])
 
 
-def _send_times(flight: Flight, speedup: float) -> FloatArray:
-    """Each position's time on the ground station's clock, its delivery delay taken off."""
+def _send_times(flight: Flight) -> FloatArray:
+    """Each position's time on the ground station's clock, its delivery delay taken off.
+
+    Locally the vehicle's clock runs at a steady rate against the ground station's (a SITL
+    that cannot keep its speed-up runs slower, not unevenly), so within a window of
+    :data:`DELAY_WINDOW` positions arrival is fitted as a line of the vehicle's clock, and
+    the line is lowered onto the earliest arrivals: delivery only ever adds delay.
+    """
     wall = np.array([p.wall_s for p in flight.track], dtype=np.float64)
-    own = np.array([p.time_s for p in flight.track], dtype=np.float64) / speedup
-    offset = minimum_filter1d(wall - own, size=DELAY_WINDOW, mode="nearest")
-    return np.asarray(own + offset, dtype=np.float64)
+    own = np.array([p.time_s for p in flight.track], dtype=np.float64)
+    size = min(DELAY_WINDOW, len(own))
+    mean_own = uniform_filter1d(own, size, mode="nearest")
+    mean_wall = uniform_filter1d(wall, size, mode="nearest")
+    spread = uniform_filter1d(own * own, size, mode="nearest") - mean_own**2
+    cross = uniform_filter1d(own * wall, size, mode="nearest") - mean_own * mean_wall
+    rate = np.where(spread > 1e-12, cross / np.maximum(spread, 1e-12), 0.0)
+    base = mean_wall + rate * (own - mean_own)
+    lowered = minimum_filter1d(wall - base, size=size, mode="nearest")
+    return np.asarray(base + lowered, dtype=np.float64)
 
 
-def _track(flight: Flight, ground_m: float, speedup: float) -> _Track | None:
+def _track(flight: Flight, ground_m: float) -> _Track | None:
     if len(flight.track) < 2:
         return None
-    t = _send_times(flight, speedup)
+    t = _send_times(flight)
     order = np.argsort(t, kind="stable")
     lat = np.array([p.lat_deg for p in flight.track], dtype=np.float64)[order]
     lon = np.array([p.lon_deg for p in flight.track], dtype=np.float64)[order]
     rel = np.array([p.alt_rel_m for p in flight.track], dtype=np.float64)[order]
+    own = np.array([p.time_s for p in flight.track], dtype=np.float64)[order]
     x, y, z = _ECEF.transform(lon, lat, ground_m + rel)
     ecef = np.column_stack([x, y, z]).astype(np.float64)
-    return _Track(t[order], ecef, rel, lat, lon, ground_m + rel)
+    return _Track(t[order], ecef, rel, lat, lon, ground_m + rel, own)
 
 
-def _takeoff(track: _Track | None) -> float:
+def _takeoff(track: _Track | None) -> int | None:
+    """The index of the first position in the air."""
     if track is None or not (track.rel_m > ON_GROUND_M).any():
-        return math.nan
-    return float(track.time_s[np.argmax(track.rel_m > ON_GROUND_M)])
+        return None
+    return int(np.argmax(track.rel_m > ON_GROUND_M))
 
 
 def closest_approach(
-    flights: Sequence[Flight], homes_amsl_m: Sequence[float], speedup: float
+    flights: Sequence[Flight], homes_amsl_m: Sequence[float]
 ) -> tuple[Approach | None, tuple[float, ...]]:
     """The closest 3-D approach of any two vehicles at equal times, while at least one of
-    them flies; and each vehicle's take-off, in simulated seconds after the first.
+    them flies; and each vehicle's take-off, in wall seconds after the first (NaN for one
+    that never took off).
 
     Positions are compared on one clock (see the module docstring), each track linearly
     interpolated at the other's sample times.
     """
-    tracks = [_track(f, ground, speedup) for f, ground in zip(flights, homes_amsl_m, strict=True)]
-    airborne = np.array([_takeoff(t) for t in tracks], dtype=np.float64)
+    tracks = [_track(f, ground) for f, ground in zip(flights, homes_amsl_m, strict=True)]
+    lifts = [_takeoff(t) for t in tracks]
+    airborne = np.array(
+        [
+            t.time_s[k] if t is not None and k is not None else math.nan
+            for t, k in zip(tracks, lifts, strict=True)
+        ],
+        dtype=np.float64,
+    )
     first = float(np.nanmin(airborne)) if np.isfinite(airborne).any() else math.nan
-    takeoff = tuple(float((a - first) * speedup) for a in airborne)
+    takeoff = tuple(float(a - first) for a in airborne)
     best: Approach | None = None
     for i, a in enumerate(tracks):
         for j in range(i + 1, len(tracks)):
@@ -286,13 +310,16 @@ def closest_approach(
             if best is not None and gap[k] >= best.distance_m:
                 continue
             t = float(times[k])
+            lift = lifts[i]
+            start = a.own_s[lift] if lift is not None else a.own_s[0]
+            since = float(a.at(a.own_s, t)) - float(start)
             vertical = abs(float(a.at(a.amsl_m, t)) - float(b.at(b.amsl_m, t)))
             best = Approach(
                 (i + 1, j + 1),
                 float(gap[k]),
                 math.sqrt(max(float(gap[k]) ** 2 - vertical**2, 0.0)),
                 vertical,
-                (t - first) * speedup,
+                since,
                 (float(a.at(a.lat_deg, t)) + float(b.at(b.lat_deg, t))) / 2.0,
                 (float(a.at(a.lon_deg, t)) + float(b.at(b.lon_deg, t))) / 2.0,
             )
@@ -339,9 +366,7 @@ def replay_fleet(
         for flight, mission, exp, v in zip(flights, missions, expected, fleet.vehicles, strict=True)
     ]
     together = judge_set(reports, dem_path, targets_path)
-    approach, takeoff = closest_approach(
-        flights, [m.home.amsl_m for m in missions], settings.speedup
-    )
+    approach, takeoff = closest_approach(flights, [m.home.amsl_m for m in missions])
     required = required_separation_m(fleet.separation)
     problems = []
     if approach is None:
@@ -376,13 +401,13 @@ def fleet_report_text(report: FleetReport) -> str:
     )
     lines = [f"fleet: {len(report.vehicles)} vehicles flown at once, separation {rule}"]
     for vehicle, flight_report, takeoff in zip(
-        report.vehicles, report.together.reports, report.takeoff_s, strict=True
+        report.vehicles, report.together.reports, report.takeoff_wall_s, strict=True
     ):
         flight = flight_report.flight
         seen = sum(r.photo is not None for r in flight_report.targets)
         lines.append(
             f"  {vehicle.name:<10} {vehicle.altitude_m:g} m, flight {flight.sim_time_s:.1f} s, "
-            f"take-off at +{takeoff:.1f} s, {len(flight.photos)} photos, {seen} of "
+            f"took off {takeoff:+.2f} s (wall), {len(flight.photos)} photos, {seen} of "
             f"{len(flight_report.targets)} own targets, "
             f"{'PASS' if flight_report.ok else 'FAIL'}"
         )
@@ -393,7 +418,8 @@ def fleet_report_text(report: FleetReport) -> str:
         )
         lines.append(
             f"  closest   {approach.distance_m:.1f} m between vehicles {approach.pair[0]} and "
-            f"{approach.pair[1]}, {approach.time_s:.1f} s after the first take-off, at "
+            f"{approach.pair[1]}, {approach.time_s:.1f} s into vehicle {approach.pair[0]}'s "
+            "flight, at "
             f"{approach.lat_deg:.6f},{approach.lon_deg:.6f} (horizontal "
             f"{approach.horizontal_m:.1f} m, vertical {approach.vertical_m:.1f} m){planned}"
         )
