@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
@@ -350,3 +351,24 @@ def _zombie(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
     except OSError:
         return True
+
+
+def test_fleet_replay_refusals_are_one_line(fleet2: Path, tmp_path: Path) -> None:
+    base = ["sitl", "replay", "--dem", str(SITE), "--targets", str(TARGETS)]
+    cases = {
+        "give --plan or --fleet, not both": ["--fleet", str(fleet2), "--plan", str(fleet2)],
+        "not --connect or --px4": ["--fleet", str(fleet2), "--connect", "udpin://127.0.0.1:1"],
+        "no mission given": [],
+    }
+    # A vehicle with two sorties: a fleet replay flies one mission per vehicle.
+    sorties = tmp_path / "sorties"
+    shutil.copytree(fleet2, sorties)
+    vehicle = sorties / "vehicle_2"
+    for suffix in (".plan", ".waypoints"):
+        shutil.copy(vehicle / f"mission{suffix}", vehicle / f"mission_2{suffix}")
+        (vehicle / f"mission{suffix}").rename(vehicle / f"mission_1{suffix}")
+    cases["vehicle 2 has 2 sorties"] = ["--fleet", str(sorties)]
+    for words, args in cases.items():
+        result = CliRunner().invoke(main, [*base, *args])
+        assert result.exit_code == 1, (words, result.output)
+        assert len(result.stderr.splitlines()) == 1 and words in result.stderr, result.stderr
