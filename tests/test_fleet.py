@@ -372,3 +372,25 @@ def test_fleet_replay_refusals_are_one_line(fleet2: Path, tmp_path: Path) -> Non
         result = CliRunner().invoke(main, [*base, *args])
         assert result.exit_code == 1, (words, result.output)
         assert len(result.stderr.splitlines()) == 1 and words in result.stderr, result.stderr
+
+
+@pytest.mark.sitl_real
+@pytest.mark.skipif(not os.access(BINARY, os.X_OK), reason=f"no ArduCopter SITL at {BINARY}")
+def test_ctrl_c_during_a_fleet_replay_stops_every_sitl(
+    fleet2: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both SITLs are up when Ctrl-C comes; both processes are gone after it."""
+    import urpt_gcs.sitl.fleet as fleet_module
+
+    def interrupted(*_args: Any) -> Any:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fleet_module, "_fly_all", interrupted)
+    said: list[str] = []
+    settings = ReplaySettings(speedup=20.0, ardupilot=BINARY)
+    with pytest.raises(KeyboardInterrupt):
+        replay_fleet(SITE, TARGETS, read_fleet(fleet2), settings, said.append)
+    pids = [int(m.split("(pid ")[1].rstrip(")")) for m in said if "(pid " in m]
+    assert len(pids) == 2
+    for pid in pids:
+        assert not Path(f"/proc/{pid}").exists() or _zombie(pid)
