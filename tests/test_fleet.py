@@ -394,3 +394,54 @@ def test_ctrl_c_during_a_fleet_replay_stops_every_sitl(
     assert len(pids) == 2
     for pid in pids:
         assert not Path(f"/proc/{pid}").exists() or _zombie(pid)
+
+
+def _synthetic_flight(
+    east_m_s: float, north_m: float, boot_s: float, rate: float, seed: int
+) -> Flight:
+    """A vehicle crossing the origin's meridian at 100 m, 5 m/s east or west, its clock
+    ``boot_s`` ahead, running ``rate`` simulated seconds per wall second; each position
+    arrives 0-20 ms late."""
+    from urpt_gcs.link import UploadReport
+    from urpt_gcs.sitl.replay import TrackPoint, VehicleIdentity
+
+    rng = np.random.default_rng(seed)
+    lat0, lon0 = 47.0, 9.0
+    metres_lon = 111_412.84 * math.cos(math.radians(lat0)) - 93.5 * math.cos(3 * math.radians(lat0))
+    metres_lat = 111_132.954 - 559.822 * math.cos(2 * math.radians(lat0))
+    points = []
+    for k in range(1000):
+        wall = k * 0.1 / rate  # 10 positions per simulated second
+        sim = wall * rate
+        east = east_m_s * (sim - 50.0)
+        points.append(
+            TrackPoint(
+                boot_s + sim,
+                lat0 + north_m / metres_lat,
+                lon0 + east / metres_lon,
+                100.0,
+                wall + float(rng.uniform(0.0, 0.02)),
+            )
+        )
+    upload = UploadReport("udpin://x", "ardupilot", "ardupilot", 0, 1, 0.0, None)
+    identity = VehicleIdentity("ArduPilot", "", "synthetic")
+    return Flight(upload, (), tuple(points), 100.0, 100.0 / rate, identity)
+
+
+def test_the_closest_approach_is_measured_at_equal_instants() -> None:
+    """Two vehicles pass 3 m apart at t = 50 s; their clocks differ by 123 s and one runs at
+    8x; arrival jitter of up to 20 ms (0.16 s simulated, 1.6 m at their closing speed) is
+    taken off."""
+    from urpt_gcs.sitl.fleet import _send_times, closest_approach
+
+    east = _synthetic_flight(5.0, 0.0, 0.0, 8.0, seed=1)
+    west = _synthetic_flight(-5.0, 3.0, 123.0, 8.0, seed=2)
+    sent = np.arange(1000) * 0.1 / 8.0
+    for flight in (east, west):  # each position's time, its jitter taken off
+        assert np.abs(_send_times(flight) - sent).max() < 0.003
+    approach, takeoff = closest_approach([east, west], [400.0, 400.0])
+    assert approach is not None
+    assert approach.distance_m == pytest.approx(3.0, abs=0.1)
+    assert approach.vertical_m == pytest.approx(0.0, abs=0.01)
+    assert approach.time_s == pytest.approx(50.0, abs=0.2)
+    assert takeoff[0] == pytest.approx(takeoff[1], abs=0.03)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 import pyproj
-from scipy.ndimage import minimum_filter1d, uniform_filter1d
+from scipy.ndimage import minimum_filter1d
 
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.fleet_folder import FleetFolder, FleetVehicle, Separation
@@ -239,15 +239,24 @@ def _send_times(flight: Flight) -> FloatArray:
     """
     wall = np.array([p.wall_s for p in flight.track], dtype=np.float64)
     own = np.array([p.time_s for p in flight.track], dtype=np.float64)
-    size = min(DELAY_WINDOW, len(own))
-    mean_own = uniform_filter1d(own, size, mode="nearest")
-    mean_wall = uniform_filter1d(wall, size, mode="nearest")
-    spread = uniform_filter1d(own * own, size, mode="nearest") - mean_own**2
-    cross = uniform_filter1d(own * wall, size, mode="nearest") - mean_own * mean_wall
+    # Centred, so the window sums below lose no precision.
+    x, y = own - own.mean(), wall - wall.mean()
+    half = DELAY_WINDOW // 2
+    lo = np.clip(np.arange(len(x)) - half, 0, len(x))
+    hi = np.clip(np.arange(len(x)) + half + 1, 0, len(x))
+
+    def window_sum(values: FloatArray) -> FloatArray:
+        total = np.concatenate([[0.0], np.cumsum(values)])
+        return np.asarray(total[hi] - total[lo], dtype=np.float64)
+
+    count = (hi - lo).astype(np.float64)
+    mean_x, mean_y = window_sum(x) / count, window_sum(y) / count
+    spread = window_sum(x * x) / count - mean_x**2
+    cross = window_sum(x * y) / count - mean_x * mean_y
     rate = np.where(spread > 1e-12, cross / np.maximum(spread, 1e-12), 0.0)
-    base = mean_wall + rate * (own - mean_own)
-    lowered = minimum_filter1d(wall - base, size=size, mode="nearest")
-    return np.asarray(base + lowered, dtype=np.float64)
+    line = mean_y + rate * (x - mean_x)
+    lowered = minimum_filter1d(y - line, size=2 * half + 1, mode="nearest")
+    return np.asarray(line + lowered + wall.mean(), dtype=np.float64)
 
 
 def _track(flight: Flight, ground_m: float) -> _Track | None:
