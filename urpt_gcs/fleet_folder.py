@@ -37,6 +37,8 @@ class FleetVehicle:
         Its flight altitude as the plan states it (the DEM's vertical datum).
     targets
         The names of the targets it was planned to photograph.
+    flight_time_s
+        Its planned flight time, if the summary states it.
     """
 
     number: int
@@ -44,6 +46,7 @@ class FleetVehicle:
     missions: tuple[Path, ...]
     altitude_m: float
     targets: tuple[str, ...]
+    flight_time_s: float | None = None
 
     @property
     def name(self) -> str:
@@ -140,7 +143,9 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
             f"vehicle {number}'s folder '{sub}' holds no mission.plan or mission_N.plan: plan "
             "the fleet again"
         )
-    return FleetVehicle(number, sub, missions, altitude, tuple(targets))
+    planned = row.get("flight_time_s")
+    flight_s = None if planned is None else _number(planned, f"{where}: vehicle {number}'s time")
+    return FleetVehicle(number, sub, missions, altitude, tuple(targets), flight_s)
 
 
 def _missions(folder: Path) -> tuple[Path, ...]:

@@ -415,7 +415,9 @@ def fleet_report_text(report: FleetReport) -> str:
         flight = flight_report.flight
         seen = sum(r.photo is not None for r in flight_report.targets)
         lines.append(
-            f"  {vehicle.name:<10} {vehicle.altitude_m:g} m, flight {flight.sim_time_s:.1f} s, "
+            f"  {vehicle.name:<10} {vehicle.altitude_m:g} m, flight {flight.sim_time_s:.1f} s"
+            + (f" (planned {vehicle.flight_time_s:.1f} s)" if vehicle.flight_time_s else "")
+            + ", "
             f"took off {takeoff:+.2f} s (wall), {len(flight.photos)} photos, {seen} of "
             f"{len(flight_report.targets)} own targets, "
             f"{'PASS' if flight_report.ok else 'FAIL'}"

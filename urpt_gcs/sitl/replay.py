@@ -62,6 +62,8 @@ CONNECT_TIMEOUT_S = 10.0
 # A real ArduCopter SITL needs about half a minute after boot before it will arm.
 ARM_WAIT_S = 90.0
 ARM_RETRY_S = 2.0
+# Vehicles of a fleet that are to take off together ask again sooner.
+ARM_RETRY_TOGETHER_S = 0.1
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
 # ArduCopter arms in GUIDED once it has a position, and AUTO can take off from it.
@@ -486,11 +488,17 @@ async def _start_ardupilot(
     """Arm in GUIDED and start AUTO, taking off as ``settings.takeoff`` says."""
     if settings.takeoff == "auto-options":
         await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
+    retry_s = ARM_RETRY_S
     if before_arming is not None:
+        # Ready everything but the arming itself, so the vehicles wait for each other as late
+        # as possible and then take off within moments of each other.
+        if watch.mode != ARMING_MODE:
+            await _set_mode(link, ARMING_MODE)
         await _until_armable(link, watch, ARM_WAIT_S)
         await before_arming()
+        retry_s = ARM_RETRY_TOGETHER_S
     say("arming")
-    await _arm_when_ready(link, action, watch, ARM_WAIT_S)
+    await _arm_when_ready(link, action, watch, ARM_WAIT_S, retry_s, say)
     if settings.takeoff == "guided":
         await action.set_takeoff_altitude(GUIDED_TAKEOFF_M)
         await action.takeoff()
@@ -591,7 +599,12 @@ async def _set_mode(link: MavsdkLink, mode: int) -> bool:
 
 
 async def _arm_when_ready(
-    link: MavsdkLink, action: ActionAsync, watch: _Watch, wait_s: float
+    link: MavsdkLink,
+    action: ActionAsync,
+    watch: _Watch,
+    wait_s: float,
+    retry_s: float = ARM_RETRY_S,
+    say: Progress | None = None,
 ) -> None:
     """Put the copter in GUIDED and arm; a real SITL refuses until its position estimate is
     good, so ask again. The vehicle's own "PreArm:"/"Arm:" words go into the error."""
@@ -613,7 +626,10 @@ async def _arm_when_ready(
                 + (f"; it said '{words}'" if words else "")
                 + "): check its pre-arm checks"
             ) from None
-        await asyncio.sleep(ARM_RETRY_S)
+        if say is not None:
+            words = watch.arming_words()
+            say(f"not armed yet ({problem}{'; ' + words if words else ''}): asking again")
+        await asyncio.sleep(retry_s)
 
 
 def fly(mission: Mission, settings: ReplaySettings, progress: Progress | None = None) -> Flight:
