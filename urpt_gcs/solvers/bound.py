@@ -34,7 +34,9 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 import numpy.typing as npt
+from shapely.geometry import Polygon
 
+from urpt_gcs.solvers.order_bound import order_bound
 from urpt_gcs.solvers.regions import OuterStar, RegionSet
 from urpt_gcs.terrain import FloatArray
 
@@ -51,6 +53,8 @@ _START_BANDS = 2
 _MAX_PIECES_PER_REGION = 96
 # Most work (starts x subsets x pieces^2) for one exact relaxed optimum.
 _EXACT_WORK = 3e8
+# Share of the time limit for the order search when it may not finish.
+_ORDER_SHARE = 0.8
 # Subgradient iterations per round.
 _ROUND_ITERATIONS = 3000
 
@@ -458,6 +462,12 @@ class Bound:
     rounds: int
     n_pieces: int
     seconds: float
+    # The order search (:mod:`urpt_gcs.solvers.order_bound`): nodes solved, left open, and
+    # whether it closed every node (then ``value`` is the optimum of the star relaxation,
+    # to the gap target).
+    order_nodes: int = 0
+    order_open: int = 0
+    order_finished: bool = False
 
 
 def lower_bound(
@@ -466,6 +476,7 @@ def lower_bound(
     time_limit_s: float,
     gap_target: float = 1e-4,
     method: str = "auto",
+    exact_shapes: bool = False,
 ) -> Bound:
     """A lower bound of every closed tour (through the depot, if any) entering every region.
 
@@ -481,10 +492,31 @@ def lower_bound(
     gap_target
         Stop once ``(upper - bound) / bound`` is at most this.
     method
-        ``exact`` or ``lagrangian`` for the relaxed problem; ``auto``: exact for a few
-        regions, else the Lagrangian and the exact optimum over a subset far apart.
+        ``order``: branch and bound over visiting orders (:func:`order_bound`); ``exact`` or
+        ``lagrangian`` for the relaxed piece problem; ``auto``: the order search and, when it
+        does not finish, the best of it and the piece bounds in the time left.
+    exact_shapes
+        The polygons are the regions themselves, not only inside them: the order search
+        bounds the polygons (tighter than their outer stars). Leave it False when the outer
+        stars are the only sets known to hold the regions (regions on terrain).
     """
     started = time.perf_counter()
+    if method in ("auto", "order"):
+        share = time_limit_s if method == "order" else _ORDER_SHARE * time_limit_s
+        found = _order(regions, upper, share, gap_target, exact_shapes)
+        if (
+            method == "order"
+            or found.order_finished
+            or upper - found.value <= gap_target * found.value
+        ):
+            return found
+        left = max(time_limit_s - (time.perf_counter() - started), 0.0)
+        other = lower_bound(regions, upper, left, gap_target, method="pieces")
+        top = found if found.value >= other.value else other
+        return Bound(
+            top.value, top.method, other.rounds, other.n_pieces,
+            time.perf_counter() - started, found.order_nodes, found.order_open, False,
+        )  # fmt: skip
     pieces, boundary = start_pieces(regions)
     skip = skipped_regions(regions)
     stars: list[OuterStar | None] = [s for s, k in zip(regions.outer, skip, strict=True) if not k]
@@ -494,7 +526,7 @@ def lower_bound(
     if m <= 1:
         return Bound(0.0, "single region", 0, pieces.n, 0.0)
     exact = m - 1 <= EXACT_MAX_REGIONS and _exact_work(pieces, m) <= _EXACT_WORK
-    exact = method == "exact" or (exact and method == "auto")
+    exact = method == "exact" or (exact and method == "pieces")
     mu = np.zeros(pieces.n)
     best = 0.0
     rounds = 0
@@ -514,7 +546,7 @@ def lower_bound(
         best = max(best, value)
         spent = time.perf_counter() - started
         # Without the exact optimum, half the time is kept for the subset bound.
-        own_limit = time_limit_s if exact or method != "auto" else 0.5 * time_limit_s
+        own_limit = time_limit_s if exact or method != "pieces" else 0.5 * time_limit_s
         if upper - best <= gap_target * best or spent >= own_limit or not used.any():
             break
         finer, parent = split(pieces, used, stars, boundary)
@@ -524,7 +556,7 @@ def lower_bound(
         # A half keeps its parent's multiplier: the bound at the old multipliers can only rise.
         mu = np.ascontiguousarray(mu[parent])
     method = "exact" if exact else "lagrangian"
-    if method == "auto" and not exact:
+    if method == "pieces" and not exact:
         left = time_limit_s - (time.perf_counter() - started)
         sub = subset_bound(regions, upper, max(left, 0.0), gap_target)
         if sub.value > best:
@@ -565,4 +597,25 @@ def subset_bound(
         outer=tuple(regions.outer[i] for i in chosen),
         depot_inside=tuple(False for _ in chosen),
     )
-    return lower_bound(sub, upper, time_limit_s, gap_target)
+    return lower_bound(sub, upper, time_limit_s, gap_target, method="pieces")
+
+
+def _order(
+    regions: RegionSet, upper: float, time_limit_s: float, gap_target: float, exact_shapes: bool
+) -> Bound:
+    started = time.perf_counter()
+    skip = skipped_regions(regions)
+    kept = np.flatnonzero(~skip)
+    stars: list[OuterStar | None] = [regions.outer[i] for i in kept]
+    shapes: list[Polygon | None] | None = None
+    if exact_shapes and regions.polygons is not None:
+        shapes = [regions.polygons[i] for i in kept]
+    if regions.depot_xy is not None:
+        stars.append(None)
+        if shapes is not None:
+            shapes.append(None)
+    found = order_bound(stars, regions.depot_xy, upper, time_limit_s, gap_target, shapes)
+    return Bound(
+        found.value, "order", 0, 0, time.perf_counter() - started,
+        found.nodes, found.open_nodes, found.finished,
+    )  # fmt: skip

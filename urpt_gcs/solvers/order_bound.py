@@ -37,6 +37,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 import numpy.typing as npt
+import shapely
+from shapely.geometry import LineString, Point, Polygon
 
 from urpt_gcs.solvers.regions import OuterStar
 from urpt_gcs.terrain import FloatArray
@@ -171,7 +173,7 @@ def _support_min(
         d = vx[v] * wx + vy[v] * wy
         if d < best:
             best = d
-    return best - rad[s] * math.hypot(wx, wy)
+    return float(best - rad[s] * math.hypot(wx, wy))
 
 
 @nb.njit(cache=True)
@@ -230,10 +232,13 @@ def solve_order(
     dirx = np.empty(k)
     diry = np.empty(k)
     best_l = -np.inf
-    primal = _length(px, py)
+    # The starting points need not lie in their sets (a split piece): lengths count only
+    # after a projection.
+    primal = np.inf
     for it in range(iterations + 1):
         if it % _CHECK_EVERY == 0:
-            primal = min(primal, _length(px, py))
+            if it > 0:
+                primal = min(primal, _length(px, py))
             cert = _certify(seq, ux, uy, vptr, vx, vy, rad, scale)
             if cert > best_l:
                 best_l = cert
@@ -253,7 +258,7 @@ def solve_order(
                 best_l = cert
                 best_ux[:] = dirx
                 best_uy[:] = diry
-            if best_l >= prune_at or primal - best_l <= _NODE_TOL * primal:
+            if best_l >= prune_at or (it > 0 and primal - best_l <= _NODE_TOL * primal):
                 break
             if it == iterations:
                 break
@@ -313,7 +318,7 @@ def _seg_dist(
             d4 = dx * (ey - ay) - dy * (ex - ax)
             if d1 * d2 <= 0.0 and d3 * d4 <= 0.0:
                 return 0.0
-    return max(best - rad[s], 0.0)
+    return float(max(best - rad[s], 0.0))
 
 
 @nb.njit(cache=True)
@@ -335,16 +340,76 @@ def _far_regions(
         out[c] = best
 
 
+@nb.njit(cache=True)
+def _meets_star(
+    px: FloatArray, py: FloatArray, cx: float, cy: float, reach: FloatArray, slack: float
+) -> bool:
+    """Whether the closed polyline through ``p`` meets the star (centre, sector reaches)."""
+    k = px.size
+    n = reach.size
+    for i in range(k):
+        j = (i + 1) % k
+        ax, ay = px[i] - cx, py[i] - cy
+        dx, dy = px[j] - px[i], py[j] - py[i]
+        for s in range(n):
+            a = 2.0 * math.pi * s / n
+            b = 2.0 * math.pi * (s + 1) / n
+            ea, eb = (math.cos(a), math.sin(a)), (math.cos(b), math.sin(b))
+            lo, hi = 0.0, 1.0
+            # Left of the ray at angle a, right of the ray at angle b (sectors narrower than pi).
+            for f0, f1 in (
+                (ea[0] * ay - ea[1] * ax, ea[0] * (ay + dy) - ea[1] * (ax + dx)),
+                (ax * eb[1] - ay * eb[0], (ax + dx) * eb[1] - (ay + dy) * eb[0]),
+            ):
+                if f0 < 0.0 and f1 < 0.0:
+                    lo, hi = 1.0, 0.0
+                elif f0 < 0.0:
+                    lo = max(lo, f0 / (f0 - f1))
+                elif f1 < 0.0:
+                    hi = min(hi, f0 / (f0 - f1))
+            if lo > hi:
+                continue
+            ll = dx * dx + dy * dy
+            t = 0.0 if ll <= 0.0 else -(ax * dx + ay * dy) / ll
+            t = min(max(t, lo), hi)
+            if math.hypot(ax + t * dx, ay + t * dy) <= reach[s] + slack:
+                return True
+    return False
+
+
 # --- the search ---------------------------------------------------------------------------
+
+
+def _shape_hull(shape: Polygon, star: OuterStar, k0: int, count: int) -> tuple[FloatArray, float]:
+    """The hull of the polygon's part in sectors ``k0 .. k0 + count - 1`` about the star's
+    centre (empty: no vertex), grown a hair against rounding."""
+    n = star.reach_m.size
+    part = shape
+    if count < n:
+        cx, cy = star.center_xy
+        far = 2.0 * float(star.reach_m.max()) + 1.0
+        a = np.linspace(2.0 * math.pi * k0 / n, 2.0 * math.pi * (k0 + count) / n, 4 * count + 1)
+        wedge = Polygon([(cx, cy), *zip(cx + far * np.cos(a), cy + far * np.sin(a), strict=True)])
+        part = shape.intersection(wedge)
+    xy = shapely.get_coordinates(part)
+    if len(xy) == 0:
+        return np.zeros((0, 2)), 0.0
+    return _hull(xy), 1e-9 * (1.0 + float(np.abs(xy).max()))
 
 
 class _Sets:
     """Convex supersets, numbered: per region its whole star's hull and, on demand, hulls of
     star pieces ``(region, first sector, sector count)``."""
 
-    def __init__(self, stars: list[OuterStar | None], depot_xy: tuple[float, float] | None):
+    def __init__(
+        self,
+        stars: list[OuterStar | None],
+        depot_xy: tuple[float, float] | None,
+        shapes: list[Polygon | None] | None = None,
+    ):
         self.stars = stars
         self.depot_xy = depot_xy
+        self.shapes = shapes or [None] * len(stars)
         self.key: dict[tuple[int, int, int], int] = {}
         self.piece: list[tuple[int, int, int]] = []
         self.verts: list[FloatArray] = []
@@ -365,6 +430,8 @@ class _Sets:
         if star is None:
             assert self.depot_xy is not None
             verts, r = np.asarray([self.depot_xy], dtype=np.float64), 0.0
+        elif self.shapes[region] is not None:
+            verts, r = _shape_hull(self.shapes[region], star, k0, count)
         elif is_disc(star):
             verts, r = np.asarray([star.center_xy], dtype=np.float64), float(star.reach_m[0])
         else:
@@ -375,6 +442,23 @@ class _Sets:
         self.radius.append(r)
         self._arrays = None
         return self.key[key]
+
+    def holds(self, region: int, x: float, y: float, slack: float) -> bool:
+        """Whether the region's star (or shape) holds the point, to ``slack``."""
+        shape, star = self.shapes[region], self.stars[region]
+        if shape is not None:
+            return bool(shape.distance(Point(x, y)) <= slack)
+        return star is None or in_star(star, x, y, slack)
+
+    def met_by(self, region: int, px: FloatArray, py: FloatArray, slack: float) -> bool:
+        """Whether the closed polyline through ``p`` meets the region's star (or shape)."""
+        shape, star = self.shapes[region], self.stars[region]
+        if shape is not None:
+            ring = LineString(np.column_stack([np.append(px, px[0]), np.append(py, py[0])]))
+            return bool(shape.distance(ring) <= slack)
+        if star is None or is_disc(star):
+            return True
+        return bool(_meets_star(px, py, *star.center_xy, star.reach_m, slack))
 
     def arrays(self) -> tuple[I64, FloatArray, FloatArray, FloatArray]:
         if self._arrays is None:
@@ -399,6 +483,9 @@ class OrderBound:
     open_nodes: int
     finished: bool
     seconds: float
+    # The shortest closed polyline met that meets every set searched (the stars, or the
+    # shapes where given): a real tour when those are the regions themselves.
+    leaf_length: float = math.inf
 
 
 @dataclass(slots=True)
@@ -418,16 +505,19 @@ def order_bound(
     upper: float,
     time_limit_s: float,
     gap_target: float = 1e-4,
+    shapes: list[Polygon | None] | None = None,
 ) -> OrderBound:
     """A lower bound of every closed tour entering every star (``None``: the depot point).
 
-    The search stops when its bound reaches ``upper * (1 - gap_target)``, when nothing is
-    left open, or at the time limit; the bound holds in every case."""
+    ``shapes[i]``, where given, is region ``i`` itself (inside its star): its pieces are then
+    hulls of the shape, not of the star. The search stops when its bound reaches
+    ``upper * (1 - gap_target)``, when nothing is left open, or at the time limit; the bound
+    holds in every case."""
     started = time.perf_counter()
     m = len(stars)
     if m <= 1:
         return OrderBound(0.0, 0, 0, True, 0.0)
-    sets = _Sets(stars, depot_xy)
+    sets = _Sets(stars, depot_xy, shapes)
     cx = np.asarray([s.center_xy[0] if s else depot_xy[0] for s in stars])  # type: ignore[index]
     cy = np.asarray([s.center_xy[1] if s else depot_xy[1] for s in stars])  # type: ignore[index]
     cr = np.asarray([float(s.reach_m.max()) if s else 0.0 for s in stars])
@@ -437,13 +527,19 @@ def order_bound(
     prune_at = upper * (1.0 - 0.5 * gap_target)
 
     # The root: three regions far apart (the depot first, when there is one).
-    first = [m - 1] if depot_xy is not None else [int(np.argmax(np.hypot(cx - cx.mean(), cy - cy.mean()) + cr))]
+    first = (
+        [m - 1]
+        if depot_xy is not None
+        else [int(np.argmax(np.hypot(cx - cx.mean(), cy - cy.mean()) + cr))]
+    )
     while len(first) < min(3, m):
         gap = np.min([np.hypot(cx - cx[j], cy - cy[j]) - cr - cr[j] for j in first], axis=0)
         gap[first] = -np.inf
         first.append(int(np.argmax(gap)))
     seq = np.asarray([j for j in first], dtype=np.int64)
-    root = _Node(seq, cx[seq].copy(), cy[seq].copy(), np.zeros(len(seq)), np.zeros(len(seq)), 0.0, 0.0)
+    root = _Node(
+        seq, cx[seq].copy(), cy[seq].copy(), np.zeros(len(seq)), np.zeros(len(seq)), 0.0, 0.0
+    )
     _solve(root, sets, step, prune_at, scale)
 
     closed = math.inf  # the least certified value of the nodes taken out for good
@@ -455,6 +551,7 @@ def order_bound(
     else:
         heap.append((root.cert, 0, root))
     finished = True
+    leaf = math.inf
     while heap:
         if heap[0][0] >= prune_at:
             break
@@ -466,6 +563,7 @@ def order_bound(
         if children is None:
             # Every region met: this node's value bounds all its completions.
             closed = min(closed, node.cert)
+            leaf = min(leaf, node.primal)
             continue
         for child in children:
             _solve(child, sets, step, prune_at, scale)
@@ -477,7 +575,8 @@ def order_bound(
                 heapq.heappush(heap, (child.cert, counter, child))
     open_low = heap[0][0] if heap else math.inf
     value = min(closed, open_low, upper)
-    return OrderBound(max(value, 0.0), nodes, len(heap), finished and not heap, time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+    return OrderBound(max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf)
 
 
 def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float) -> None:
@@ -492,6 +591,7 @@ def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float)
 def _branch(node: _Node, sets: _Sets, m: int, cx: FloatArray, cy: FloatArray) -> list[_Node] | None:
     """The children of a node, or None when its polyline meets every star."""
     regions = np.asarray([sets.piece[s][0] for s in node.seq], dtype=np.int64)
+    slack = 1e-9 * (1.0 + abs(node.primal))
     vptr, vx, vy, rad = sets.arrays()
     missing = np.setdiff1d(np.arange(m, dtype=np.int64), regions)
     if missing.size:
@@ -500,26 +600,39 @@ def _branch(node: _Node, sets: _Sets, m: int, cx: FloatArray, cy: FloatArray) ->
         far = int(np.argmax(dist))
         if dist[far] > 1e-9 * (1.0 + abs(node.primal)):
             return _insertions(node, int(missing[far]), sets)
+        # The polyline meets every hull; a star it misses all the same (a crescent's notch).
+        for j in missing:
+            if not sets.met_by(int(j), node.px, node.py, slack):
+                return _insertions(node, int(j), sets)
     # A point in its piece's hull but outside the star: split that piece.
     for pos, s in enumerate(node.seq):
         region, k0, count = sets.piece[int(s)]
         star = sets.stars[region]
-        if star is None or count <= 1 or is_disc(star):
+        if star is None or count <= 1 or (is_disc(star) and sets.shapes[region] is None):
             continue
-        if in_star(star, float(node.px[pos]), float(node.py[pos]), 1e-9 * (1.0 + abs(node.primal))):
+        if sets.holds(region, float(node.px[pos]), float(node.py[pos]), slack):
             continue
         half = count // 2
         out = []
         for a, c in ((k0, half), ((k0 + half) % sets.sectors(region), count - half)):
             child = _copy(node)
             child.seq[pos] = sets.get(region, a, c)
-            out.append(child)
+            if len(sets.verts[int(child.seq[pos])]):
+                out.append(child)
         return out
     return None
 
 
 def _copy(node: _Node) -> _Node:
-    return _Node(node.seq.copy(), node.px.copy(), node.py.copy(), node.ux.copy(), node.uy.copy(), node.cert, node.primal)
+    return _Node(
+        node.seq.copy(),
+        node.px.copy(),
+        node.py.copy(),
+        node.ux.copy(),
+        node.uy.copy(),
+        node.cert,
+        node.primal,
+    )
 
 
 def _insertions(node: _Node, region: int, sets: _Sets) -> list[_Node]:
