@@ -7,6 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
+import shapely
 from conftest import CETSP, needs_shared
 from shapely.geometry import Polygon
 
@@ -121,3 +122,55 @@ def test_bound_never_above_a_proven_cetsp_optimum(name: str, optimum: float) -> 
     bound = lower_bound(regions, upper=optimum * 1.001, time_limit_s=0.05)
     # B&B optima are proven to a relative tolerance of 1e-4.
     assert 0.0 < bound.value <= optimum * (1.0 + 1e-4)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_order_bound_is_below_and_close_to_a_brute_force_tour(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    n = 5
+    discs = np.column_stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), rng.uniform(0.5, 3, n)])
+    depot = (10.0, 10.0) if seed % 2 == 0 else None
+    regions = RegionSet(discs=discs, depot_xy=depot)
+    brute = _brute_force([_disc_grid(*d, 15 if depot else 9) for d in discs], depot)
+    bound = lower_bound(regions, upper=brute * 1.5, time_limit_s=5.0, method="order")
+    assert bound.order_finished
+    assert bound.value <= brute * (1.0 + 1e-9)
+    # The search over orders closes on the optimum: only the grid's coarseness is left.
+    assert bound.value >= 0.99 * brute
+
+
+def _crescent(cx: float, cy: float, r: float, turn: float) -> Polygon:
+    """A star-shaped, far from convex region: a disc with a deep notch cut from one side."""
+    a = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)
+    notch = np.abs(np.angle(np.exp(1j * (a - turn)))) < 1.0
+    rr = np.where(notch, 0.25 * r, r)
+    return Polygon(np.column_stack([cx + rr * np.cos(a), cy + rr * np.sin(a)]))
+
+
+@pytest.mark.parametrize("exact_shapes", [False, True])
+@pytest.mark.parametrize("seed", range(3))
+def test_order_bound_on_non_convex_regions(seed: int, exact_shapes: bool) -> None:
+    rng = np.random.default_rng(40 + seed)
+    polys = [
+        _crescent(x, y, rng.uniform(2.0, 5.0), rng.uniform(0, 2 * np.pi))
+        for x, y in rng.uniform(0, 30, (4, 2))
+    ]
+    depot = (15.0, 15.0) if seed != 1 else None
+    regions = RegionSet(polygons=tuple(polys), depot_xy=depot)
+    sets = []
+    for k, p in enumerate(polys):
+        ring = shapely.get_coordinates(
+            shapely.line_interpolate_point(p.exterior, np.linspace(0, p.exterior.length, 160))
+        )
+        x0, y0, x1, y1 = p.bounds
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 12), np.linspace(y0, y1, 12))
+        grid = np.column_stack([gx.ravel(), gy.ravel()])
+        pts = np.vstack([ring, grid])
+        sets.append(pts[regions.contains(pts, np.full(len(pts), k))])
+    brute = _brute_force(sets, depot) if depot else _brute_force([s[::3] for s in sets], None)
+    bound = lower_bound(
+        regions, upper=brute * 1.5, time_limit_s=1.0, method="order", exact_shapes=exact_shapes
+    )
+    assert bound.value <= brute * (1.0 + 1e-9)
+    # The polygons themselves bound tightly; their 64-sector stars stick out a little.
+    assert bound.value >= (0.97 if exact_shapes else 0.85) * brute
