@@ -53,8 +53,6 @@ _START_BANDS = 2
 _MAX_PIECES_PER_REGION = 96
 # Most work (starts x subsets x pieces^2) for one exact relaxed optimum.
 _EXACT_WORK = 3e8
-# Share of the time limit for the order search when it may not finish.
-_ORDER_SHARE = 0.8
 # Subgradient iterations per round.
 _ROUND_ITERATIONS = 3000
 
@@ -492,9 +490,9 @@ def lower_bound(
     gap_target
         Stop once ``(upper - bound) / bound`` is at most this.
     method
-        ``order``: branch and bound over visiting orders (:func:`order_bound`); ``exact`` or
-        ``lagrangian`` for the relaxed piece problem; ``auto``: the order search and, when it
-        does not finish, the best of it and the piece bounds in the time left.
+        ``auto`` or ``order``: branch and bound over visiting orders (:func:`order_bound`);
+        ``exact`` or ``lagrangian`` for the relaxed piece problem; ``pieces``: exact for a
+        few regions, else the Lagrangian and the exact optimum over a subset far apart.
     exact_shapes
         The polygons are the regions themselves, not only inside them: the order search
         bounds the polygons (tighter than their outer stars). Leave it False when the outer
@@ -502,21 +500,7 @@ def lower_bound(
     """
     started = time.perf_counter()
     if method in ("auto", "order"):
-        share = time_limit_s if method == "order" else _ORDER_SHARE * time_limit_s
-        found = _order(regions, upper, share, gap_target, exact_shapes)
-        if (
-            method == "order"
-            or found.order_finished
-            or upper - found.value <= gap_target * found.value
-        ):
-            return found
-        left = max(time_limit_s - (time.perf_counter() - started), 0.0)
-        other = lower_bound(regions, upper, left, gap_target, method="pieces")
-        top = found if found.value >= other.value else other
-        return Bound(
-            top.value, top.method, other.rounds, other.n_pieces,
-            time.perf_counter() - started, found.order_nodes, found.order_open, False,
-        )  # fmt: skip
+        return _order(regions, upper, time_limit_s, gap_target, exact_shapes)
     pieces, boundary = start_pieces(regions)
     skip = skipped_regions(regions)
     stars: list[OuterStar | None] = [s for s, k in zip(regions.outer, skip, strict=True) if not k]

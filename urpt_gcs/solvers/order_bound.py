@@ -55,6 +55,8 @@ _CHECK_EVERY = 25
 _NODE_TOL = 2e-6
 # Relative slack against rounding in every certified value.
 _ROUNDING = 1e-10
+# Regions tried for insertion at each branching (the farthest from the node's polyline).
+_STRONG = 1
 # Open nodes kept at most (memory); past it the search stops.
 _MAX_OPEN = 400_000
 
@@ -506,13 +508,16 @@ def order_bound(
     time_limit_s: float,
     gap_target: float = 1e-4,
     shapes: list[Polygon | None] | None = None,
+    max_nodes: int | None = None,
+    strong: int | None = None,
 ) -> OrderBound:
     """A lower bound of every closed tour entering every star (``None``: the depot point).
 
     ``shapes[i]``, where given, is region ``i`` itself (inside its star): its pieces are then
     hulls of the shape, not of the star. The search stops when its bound reaches
     ``upper * (1 - gap_target)``, when nothing is left open, or at the time limit; the bound
-    holds in every case."""
+    holds in every case. ``max_nodes`` also stops it after that many node solves;
+    ``strong`` is how many regions each branching tries."""
     started = time.perf_counter()
     m = len(stars)
     if m <= 1:
@@ -523,7 +528,7 @@ def order_bound(
     cr = np.asarray([float(s.reach_m.max()) if s else 0.0 for s in stars])
     scale = float(np.abs(cx).max() + np.abs(cy).max() + cr.max() + 1.0)
     spread = float(np.hypot(cx - cx.mean(), cy - cy.mean()).mean() + cr.mean())
-    step = max(0.5 * spread, 1e-9)
+    step = max(0.15 * spread, 1e-9)
     prune_at = upper * (1.0 - 0.5 * gap_target)
 
     # The root: three regions far apart (the depot first, when there is one).
@@ -555,19 +560,24 @@ def order_bound(
     while heap:
         if heap[0][0] >= prune_at:
             break
-        if time.perf_counter() - started >= time_limit_s or len(heap) >= _MAX_OPEN:
+        over = max_nodes is not None and nodes >= max_nodes
+        if over or time.perf_counter() - started >= time_limit_s or len(heap) >= _MAX_OPEN:
             finished = False
             break
         _, _, node = heapq.heappop(heap)
-        children = _branch(node, sets, m, cx, cy)
-        if children is None:
+        ways = _branch(node, sets, m, _STRONG if strong is None else strong)
+        if ways is None:
             # Every region met: this node's value bounds all its completions.
             closed = min(closed, node.cert)
             leaf = min(leaf, node.primal)
             continue
+        for way in ways:
+            for child in way:
+                _solve(child, sets, step, prune_at, scale)
+            nodes += len(way)
+        # Any way is a valid branching: take the one whose weakest child is strongest.
+        children = max(ways, key=lambda w: min((c.cert for c in w), default=math.inf))
         for child in children:
-            _solve(child, sets, step, prune_at, scale)
-            nodes += 1
             if child.cert >= prune_at:
                 closed = min(closed, child.cert)
             else:
@@ -588,8 +598,9 @@ def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float)
     node.primal, node.cert = primal, cert
 
 
-def _branch(node: _Node, sets: _Sets, m: int, cx: FloatArray, cy: FloatArray) -> list[_Node] | None:
-    """The children of a node, or None when its polyline meets every star."""
+def _branch(node: _Node, sets: _Sets, m: int, strong: int) -> list[list[_Node]] | None:
+    """Ways to branch a node (each a list of children that cover its completions between
+    them; up to ``strong`` regions to insert), or None when its polyline meets every set."""
     regions = np.asarray([sets.piece[s][0] for s in node.seq], dtype=np.int64)
     slack = 1e-9 * (1.0 + abs(node.primal))
     vptr, vx, vy, rad = sets.arrays()
@@ -597,13 +608,14 @@ def _branch(node: _Node, sets: _Sets, m: int, cx: FloatArray, cy: FloatArray) ->
     if missing.size:
         dist = np.empty(missing.size)
         _far_regions(node.px, node.py, missing, vptr, vx, vy, rad, dist)
-        far = int(np.argmax(dist))
-        if dist[far] > 1e-9 * (1.0 + abs(node.primal)):
-            return _insertions(node, int(missing[far]), sets)
+        far = np.argsort(-dist)[:strong]
+        far = far[dist[far] > 1e-9 * (1.0 + abs(node.primal))]
+        if far.size:
+            return [_insertions(node, int(missing[f]), sets) for f in far]
         # The polyline meets every hull; a star it misses all the same (a crescent's notch).
         for j in missing:
             if not sets.met_by(int(j), node.px, node.py, slack):
-                return _insertions(node, int(j), sets)
+                return [_insertions(node, int(j), sets)]
     # A point in its piece's hull but outside the star: split that piece.
     for pos, s in enumerate(node.seq):
         region, k0, count = sets.piece[int(s)]
@@ -619,7 +631,7 @@ def _branch(node: _Node, sets: _Sets, m: int, cx: FloatArray, cy: FloatArray) ->
             child.seq[pos] = sets.get(region, a, c)
             if len(sets.verts[int(child.seq[pos])]):
                 out.append(child)
-        return out
+        return [out]
     return None
 
 
@@ -636,20 +648,45 @@ def _copy(node: _Node) -> _Node:
 
 
 def _insertions(node: _Node, region: int, sets: _Sets) -> list[_Node]:
+    """The children inserting ``region`` after each position of the node's sequence."""
     s = sets.get(region, 0, sets.sectors(region))
     vptr, vx, vy, rad = sets.arrays()
-    k = node.seq.size
-    out = []
-    for pos in range(k):
-        a, b = pos, (pos + 1) % k
-        # The new point: the set's point nearest the middle of the leg it splits.
-        mx = 0.5 * (node.px[a] + node.px[b])
-        my = 0.5 * (node.py[a] + node.py[b])
-        qx, qy = _project(mx, my, s, vptr, vx, vy, rad)
-        seq = np.insert(node.seq, pos + 1, s)
-        px = np.insert(node.px, pos + 1, qx)
-        py = np.insert(node.py, pos + 1, qy)
-        ux = np.insert(node.ux, pos + 1, node.ux[a])
-        uy = np.insert(node.uy, pos + 1, node.uy[a])
-        out.append(_Node(seq, px, py, ux, uy, node.cert, node.primal))
-    return out
+    seq, px, py, ux, uy = _insert_all(
+        node.seq, node.px, node.py, node.ux, node.uy, s, vptr, vx, vy, rad
+    )
+    return [
+        _Node(seq[c], px[c], py[c], ux[c], uy[c], node.cert, node.primal)
+        for c in range(node.seq.size)
+    ]
+
+
+@nb.njit(cache=True)
+def _insert_all(
+    seq: I64, px: FloatArray, py: FloatArray, ux: FloatArray, uy: FloatArray, s: int,
+    vptr: I64, vx: FloatArray, vy: FloatArray, rad: FloatArray,
+) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray, FloatArray, FloatArray]:  # fmt: skip
+    """Row ``c``: the sequence with set ``s`` after position ``c``, its new point the set's
+    point nearest the middle of the leg it splits, its new leg's multiplier the split leg's."""
+    k = seq.size
+    oseq = np.empty((k, k + 1), dtype=np.int64)
+    opx = np.empty((k, k + 1))
+    opy = np.empty((k, k + 1))
+    oux = np.empty((k, k + 1))
+    ouy = np.empty((k, k + 1))
+    for c in range(k):
+        b = (c + 1) % k
+        qx, qy = _project(0.5 * (px[c] + px[b]), 0.5 * (py[c] + py[b]), s, vptr, vx, vy, rad)
+        for i in range(k + 1):
+            if i <= c:
+                src = i
+            elif i == c + 1:
+                src = -1
+            else:
+                src = i - 1
+            if src >= 0:
+                oseq[c, i], opx[c, i], opy[c, i] = seq[src], px[src], py[src]
+                oux[c, i], ouy[c, i] = ux[src], uy[src]
+            else:
+                oseq[c, i], opx[c, i], opy[c, i] = s, qx, qy
+                oux[c, i], ouy[c, i] = ux[c], uy[c]
+    return oseq, opx, opy, oux, ouy
