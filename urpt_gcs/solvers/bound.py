@@ -1,5 +1,10 @@
 """A certified lower bound for the continuous problem: every tour entering every region.
 
+The bound :func:`lower_bound` reports by default is the branch and bound over visiting orders
+of :mod:`urpt_gcs.solvers.order_bound` (fixed-order relaxations over convex supersets of the
+regions, each node certified by weak duality). This module also keeps an older, weaker bound
+(``method="pieces"``, ``"exact"`` or ``"lagrangian"``), described below.
+
 Each region's outer star (a set that contains it) is cut into *pieces*, annular sectors
 ``{c + s (cos t, sin t) : r0 <= s <= r1, t0 <= t <= t1}`` whose union covers the star, and the
 depot is a piece of its own. A tour enters region ``i`` at some point, which lies in one of

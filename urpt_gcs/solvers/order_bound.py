@@ -58,7 +58,7 @@ _ROUNDING = 1e-10
 # Regions tried for insertion at each branching (the farthest from the node's polyline).
 _STRONG = 1
 # Open nodes kept at most (memory); past it the search stops.
-_MAX_OPEN = 400_000
+_MAX_OPEN = 250_000
 
 
 def star_hull(star: OuterStar, k0: int, count: int) -> FloatArray:
@@ -690,3 +690,11 @@ def _insert_all(
                 oseq[c, i], opx[c, i], opy[c, i] = s, qx, qy
                 oux[c, i], ouy[c, i] = ux[c], uy[c]
     return oseq, opx, opy, oux, ouy
+
+
+def prepare() -> None:
+    """Compile the search's kernels (cached on disk) on a tiny instance, so that a first
+    bound's time limit is not spent compiling."""
+    disc = OuterStar((0.0, 0.0), np.ones(8))
+    notch = OuterStar((5.0, 0.0), np.asarray([1.0, 1.0, 0.2, 1.0, 1.0, 1.0, 1.0, 1.0]))
+    order_bound([disc, notch, None], (0.0, 5.0), 1e9, 1.0, max_nodes=20)
