@@ -107,12 +107,18 @@ def test_pieces_cover_the_outer_stars() -> None:
         assert hit.any(axis=1).all()
 
 
-def _proven() -> list[tuple[str, float]]:
+def _proven_all(most_discs: int = 100) -> list[tuple[str, float]]:
     if not (CETSP / "best_known.csv").is_file():
         return []
     with (CETSP / "best_known.csv").open(encoding="utf-8", newline="") as f:
         rows = [r for r in csv.DictReader(f) if r["proven_optimal"] == "yes"]
-    return [(r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= 50]
+    return [
+        (r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= most_discs
+    ]
+
+
+def _proven() -> list[tuple[str, float]]:
+    return _proven_all(50)
 
 
 @needs_shared("bench/cetsp")
@@ -174,3 +180,61 @@ def test_order_bound_on_non_convex_regions(seed: int, exact_shapes: bool) -> Non
     assert bound.value <= brute * (1.0 + 1e-9)
     # The polygons themselves bound tightly; their 64-sector stars stick out a little.
     assert bound.value >= (0.97 if exact_shapes else 0.85) * brute
+
+
+def test_fixed_order_certificate_against_scipy() -> None:
+    """The weak-duality value of one fixed order: never above the optimum scipy finds for
+    that order, and close to it."""
+    from scipy.optimize import minimize
+
+    from urpt_gcs.solvers.order_bound import _Sets, solve_order
+
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        k = 6
+        discs = np.column_stack(
+            [rng.uniform(0, 20, k), rng.uniform(0, 20, k), rng.uniform(0.3, 4.0, k)]
+        )
+        regions = RegionSet(discs=discs)
+        sets = _Sets(list(regions.outer), None)
+        seq = np.arange(k, dtype=np.int64)
+        px, py = discs[:, 0].copy(), discs[:, 1].copy()
+        _, cert = solve_order(
+            seq, px, py, np.zeros(k), np.zeros(k), *sets.arrays(), 3.0, 1e9, 20.0, 4000
+        )
+
+        def length(z: np.ndarray) -> float:
+            p = z.reshape(-1, 2)
+            return float(np.hypot(*(np.roll(p, -1, axis=0) - p).T).sum())
+
+        cons = [
+            {
+                "type": "ineq",
+                "fun": lambda z, i=i, d=discs: (
+                    d[i, 2] ** 2 - ((z.reshape(-1, 2)[i] - d[i, :2]) ** 2).sum()
+                ),
+            }
+            for i in range(k)
+        ]
+        best = min(
+            minimize(
+                length,
+                (discs[:, :2] + rng.normal(0, 0.5, (k, 2))).ravel(),
+                constraints=cons,
+                method="SLSQP",
+            ).fun
+            for _ in range(3)
+        )
+        assert cert <= best * (1.0 + 1e-9)
+        assert cert >= best * (1.0 - 1e-4)
+
+
+@needs_shared("bench/cetsp")
+@pytest.mark.parametrize("name", ["suri_CETSP-50-2_r1.0", "suri_CETSP-50-5_r1.0", "kroD100_rf1.0"])
+def test_bound_closes_on_proven_cetsp_optima(name: str) -> None:
+    optimum = dict(_proven_all())[name]
+    regions = read_instance(CETSP / "instances" / f"{name}.txt")
+    bound = lower_bound(regions, upper=optimum * 1.0001, time_limit_s=20.0)
+    assert bound.order_finished
+    # Matches the published optimum to its own tolerance (1e-4 relative).
+    assert optimum * (1.0 - 1e-4) <= bound.value <= optimum * (1.0 + 1e-4)

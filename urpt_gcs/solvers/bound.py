@@ -471,6 +471,9 @@ class Bound:
     order_nodes: int = 0
     order_open: int = 0
     order_finished: bool = False
+    # The shortest closed polyline the order search met that meets every set it bounded:
+    # a tour of the problem itself for discs and for polygons bounded with exact_shapes.
+    relaxed_tour_m: float = math.inf
 
 
 def lower_bound(
@@ -606,5 +609,5 @@ def _order(
     found = order_bound(stars, regions.depot_xy, upper, time_limit_s, gap_target, shapes)
     return Bound(
         found.value, "order", 0, 0, time.perf_counter() - started,
-        found.nodes, found.open_nodes, found.finished,
+        found.nodes, found.open_nodes, found.finished, found.leaf_length,
     )  # fmt: skip
