@@ -416,6 +416,7 @@ class _Sets:
         self.piece: list[tuple[int, int, int]] = []
         self.verts: list[FloatArray] = []
         self.radius: list[float] = []
+        self.region_of = np.zeros(0, dtype=np.int64)
         self._arrays: tuple[I64, FloatArray, FloatArray, FloatArray] | None = None
         for i in range(len(stars)):
             self.get(i, 0, self.sectors(i))
@@ -442,6 +443,7 @@ class _Sets:
         self.piece.append(key)
         self.verts.append(verts)
         self.radius.append(r)
+        self.region_of = np.append(self.region_of, region)
         self._arrays = None
         return self.key[key]
 
@@ -601,10 +603,11 @@ def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float)
 def _branch(node: _Node, sets: _Sets, m: int, strong: int) -> list[list[_Node]] | None:
     """Ways to branch a node (each a list of children that cover its completions between
     them; up to ``strong`` regions to insert), or None when its polyline meets every set."""
-    regions = np.asarray([sets.piece[s][0] for s in node.seq], dtype=np.int64)
+    absent = np.ones(m, dtype=np.bool_)
+    absent[sets.region_of[node.seq]] = False
     slack = 1e-9 * (1.0 + abs(node.primal))
     vptr, vx, vy, rad = sets.arrays()
-    missing = np.setdiff1d(np.arange(m, dtype=np.int64), regions)
+    missing = np.flatnonzero(absent)
     if missing.size:
         dist = np.empty(missing.size)
         _far_regions(node.px, node.py, missing, vptr, vx, vy, rad, dist)
