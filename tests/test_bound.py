@@ -238,3 +238,22 @@ def test_bound_closes_on_proven_cetsp_optima(name: str) -> None:
     assert bound.order_finished
     # Matches the published optimum to its own tolerance (1e-4 relative).
     assert optimum * (1.0 - 1e-4) <= bound.value <= optimum * (1.0 + 1e-4)
+
+
+@pytest.mark.parametrize("sectors", [16, 64, 256])
+def test_star_piece_hulls_hold_their_star(sectors: int) -> None:
+    from urpt_gcs.solvers.order_bound import star_hull
+    from urpt_gcs.solvers.regions import OuterStar
+
+    rng = np.random.default_rng(sectors)
+    star = OuterStar((3.0, -2.0), rng.uniform(0.5, 10.0, sectors))
+    for k0, count in ((0, sectors), (sectors - 3, 5), (sectors // 2, 1)):
+        hull = Polygon(star_hull(star, k0, count))
+        k = (k0 + rng.integers(0, count, 4000)) % sectors
+        t = 2 * np.pi * (k + rng.uniform(0, 1, k.size)) / sectors
+        # Points of the star in those sectors, the rim included.
+        r = star.reach_m[k] * np.where(
+            rng.uniform(0, 1, k.size) < 0.5, 1.0, rng.uniform(0, 1, k.size)
+        )
+        x, y = 3.0 + r * np.cos(t), -2.0 + r * np.sin(t)
+        assert shapely.covers(hull, shapely.points(x, y)).all()

@@ -45,9 +45,9 @@ from urpt_gcs.terrain import FloatArray
 
 I64 = npt.NDArray[np.int64]
 
-# Sub-arcs per star sector: each is covered by the triangle of its tangents, at most
-# 1 / cos(pi / (64 * 4)) - 1 = 7.5e-5 relative beyond the arc.
-_SUBARCS = 4
+# Sub-arcs per turn at least: each is covered by the triangle of its tangents, at most
+# 1 / cos(pi / 256) - 1 = 7.5e-5 relative beyond the arc.
+_SUBARCS = 256
 # Primal-dual iterations per node, and how often the certificate is evaluated.
 _NODE_ITERATIONS = 4000
 _CHECK_EVERY = 25
@@ -65,6 +65,7 @@ def star_hull(star: OuterStar, k0: int, count: int) -> FloatArray:
     """Counter-clockwise vertices of a convex polygon holding the star's sectors
     ``k0 .. k0 + count - 1`` (modulo the sector count) and its centre."""
     n = star.reach_m.size
+    sub = max(1, -(-_SUBARCS // n))
     cx, cy = star.center_xy
     pts = [(cx, cy)]
     for j in range(count):
@@ -72,9 +73,9 @@ def star_hull(star: OuterStar, k0: int, count: int) -> FloatArray:
         r = float(star.reach_m[k])
         if r <= 0.0:
             continue
-        for s in range(_SUBARCS):
-            a = 2.0 * math.pi * (k + s / _SUBARCS) / n
-            b = 2.0 * math.pi * (k + (s + 1) / _SUBARCS) / n
+        for s in range(sub):
+            a = 2.0 * math.pi * (k + s / sub) / n
+            b = 2.0 * math.pi * (k + (s + 1) / sub) / n
             tip = r / math.cos(0.5 * (b - a)) * (1.0 + 1e-12)
             m = 0.5 * (a + b)
             rr = r * (1.0 + 1e-12)
