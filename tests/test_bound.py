@@ -7,6 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
+import shapely
 from conftest import CETSP, needs_shared
 from shapely.geometry import Polygon
 
@@ -106,12 +107,18 @@ def test_pieces_cover_the_outer_stars() -> None:
         assert hit.any(axis=1).all()
 
 
-def _proven() -> list[tuple[str, float]]:
+def _proven_all(most_discs: int = 100) -> list[tuple[str, float]]:
     if not (CETSP / "best_known.csv").is_file():
         return []
     with (CETSP / "best_known.csv").open(encoding="utf-8", newline="") as f:
         rows = [r for r in csv.DictReader(f) if r["proven_optimal"] == "yes"]
-    return [(r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= 50]
+    return [
+        (r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= most_discs
+    ]
+
+
+def _proven() -> list[tuple[str, float]]:
+    return _proven_all(50)
 
 
 @needs_shared("bench/cetsp")
@@ -121,3 +128,132 @@ def test_bound_never_above_a_proven_cetsp_optimum(name: str, optimum: float) -> 
     bound = lower_bound(regions, upper=optimum * 1.001, time_limit_s=0.05)
     # B&B optima are proven to a relative tolerance of 1e-4.
     assert 0.0 < bound.value <= optimum * (1.0 + 1e-4)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_order_bound_is_below_and_close_to_a_brute_force_tour(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    n = 5
+    discs = np.column_stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), rng.uniform(0.5, 3, n)])
+    depot = (10.0, 10.0) if seed % 2 == 0 else None
+    regions = RegionSet(discs=discs, depot_xy=depot)
+    brute = _brute_force([_disc_grid(*d, 15 if depot else 9) for d in discs], depot)
+    bound = lower_bound(regions, upper=brute * 1.5, time_limit_s=5.0, method="order")
+    assert bound.order_finished
+    assert bound.value <= brute * (1.0 + 1e-9)
+    # The search over orders closes on the optimum: only the grid's coarseness is left.
+    assert bound.value >= 0.99 * brute
+
+
+def _crescent(cx: float, cy: float, r: float, turn: float) -> Polygon:
+    """A star-shaped, far from convex region: a disc with a deep notch cut from one side."""
+    a = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)
+    notch = np.abs(np.angle(np.exp(1j * (a - turn)))) < 1.0
+    rr = np.where(notch, 0.25 * r, r)
+    return Polygon(np.column_stack([cx + rr * np.cos(a), cy + rr * np.sin(a)]))
+
+
+@pytest.mark.parametrize("exact_shapes", [False, True])
+@pytest.mark.parametrize("seed", range(3))
+def test_order_bound_on_non_convex_regions(seed: int, exact_shapes: bool) -> None:
+    rng = np.random.default_rng(40 + seed)
+    polys = [
+        _crescent(x, y, rng.uniform(2.0, 5.0), rng.uniform(0, 2 * np.pi))
+        for x, y in rng.uniform(0, 30, (4, 2))
+    ]
+    depot = (15.0, 15.0) if seed != 1 else None
+    regions = RegionSet(polygons=tuple(polys), depot_xy=depot)
+    sets = []
+    for k, p in enumerate(polys):
+        ring = shapely.get_coordinates(
+            shapely.line_interpolate_point(p.exterior, np.linspace(0, p.exterior.length, 160))
+        )
+        x0, y0, x1, y1 = p.bounds
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 12), np.linspace(y0, y1, 12))
+        grid = np.column_stack([gx.ravel(), gy.ravel()])
+        pts = np.vstack([ring, grid])
+        sets.append(pts[regions.contains(pts, np.full(len(pts), k))])
+    brute = _brute_force(sets, depot) if depot else _brute_force([s[::3] for s in sets], None)
+    bound = lower_bound(
+        regions, upper=brute * 1.5, time_limit_s=1.0, method="order", exact_shapes=exact_shapes
+    )
+    assert bound.value <= brute * (1.0 + 1e-9)
+    # The polygons themselves bound tightly; their 64-sector stars stick out a little.
+    assert bound.value >= (0.97 if exact_shapes else 0.85) * brute
+
+
+def test_fixed_order_certificate_against_scipy() -> None:
+    """The weak-duality value of one fixed order: never above the optimum scipy finds for
+    that order, and close to it."""
+    from scipy.optimize import minimize
+
+    from urpt_gcs.solvers.order_bound import _Sets, solve_order
+
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        k = 6
+        discs = np.column_stack(
+            [rng.uniform(0, 20, k), rng.uniform(0, 20, k), rng.uniform(0.3, 4.0, k)]
+        )
+        regions = RegionSet(discs=discs)
+        sets = _Sets(list(regions.outer), None)
+        seq = np.arange(k, dtype=np.int64)
+        px, py = discs[:, 0].copy(), discs[:, 1].copy()
+        _, cert = solve_order(
+            seq, px, py, np.zeros(k), np.zeros(k), *sets.arrays(), 3.0, 1e9, 20.0, 4000
+        )
+
+        def length(z: np.ndarray) -> float:
+            p = z.reshape(-1, 2)
+            return float(np.hypot(*(np.roll(p, -1, axis=0) - p).T).sum())
+
+        cons = [
+            {
+                "type": "ineq",
+                "fun": lambda z, i=i, d=discs: (
+                    d[i, 2] ** 2 - ((z.reshape(-1, 2)[i] - d[i, :2]) ** 2).sum()
+                ),
+            }
+            for i in range(k)
+        ]
+        best = min(
+            minimize(
+                length,
+                (discs[:, :2] + rng.normal(0, 0.5, (k, 2))).ravel(),
+                constraints=cons,
+                method="SLSQP",
+            ).fun
+            for _ in range(3)
+        )
+        assert cert <= best * (1.0 + 1e-9)
+        assert cert >= best * (1.0 - 1e-4)
+
+
+@needs_shared("bench/cetsp")
+@pytest.mark.parametrize("name", ["suri_CETSP-50-2_r1.0", "suri_CETSP-50-5_r1.0", "kroD100_rf1.0"])
+def test_bound_closes_on_proven_cetsp_optima(name: str) -> None:
+    optimum = dict(_proven_all())[name]
+    regions = read_instance(CETSP / "instances" / f"{name}.txt")
+    bound = lower_bound(regions, upper=optimum * 1.0001, time_limit_s=20.0)
+    assert bound.order_finished
+    # Matches the published optimum to its own tolerance (1e-4 relative).
+    assert optimum * (1.0 - 1e-4) <= bound.value <= optimum * (1.0 + 1e-4)
+
+
+@pytest.mark.parametrize("sectors", [16, 64, 256])
+def test_star_piece_hulls_hold_their_star(sectors: int) -> None:
+    from urpt_gcs.solvers.order_bound import star_hull
+    from urpt_gcs.solvers.regions import OuterStar
+
+    rng = np.random.default_rng(sectors)
+    star = OuterStar((3.0, -2.0), rng.uniform(0.5, 10.0, sectors))
+    for k0, count in ((0, sectors), (sectors - 3, 5), (sectors // 2, 1)):
+        hull = Polygon(star_hull(star, k0, count))
+        k = (k0 + rng.integers(0, count, 4000)) % sectors
+        t = 2 * np.pi * (k + rng.uniform(0, 1, k.size)) / sectors
+        # Points of the star in those sectors, the rim included.
+        r = star.reach_m[k] * np.where(
+            rng.uniform(0, 1, k.size) < 0.5, 1.0, rng.uniform(0, 1, k.size)
+        )
+        x, y = 3.0 + r * np.cos(t), -2.0 + r * np.sin(t)
+        assert shapely.covers(hull, shapely.points(x, y)).all()

@@ -1,5 +1,10 @@
 """A certified lower bound for the continuous problem: every tour entering every region.
 
+The bound :func:`lower_bound` reports by default is the branch and bound over visiting orders
+of :mod:`urpt_gcs.solvers.order_bound` (fixed-order relaxations over convex supersets of the
+regions, each node certified by weak duality). This module also keeps an older, weaker bound
+(``method="pieces"``, ``"exact"`` or ``"lagrangian"``), described below.
+
 Each region's outer star (a set that contains it) is cut into *pieces*, annular sectors
 ``{c + s (cos t, sin t) : r0 <= s <= r1, t0 <= t <= t1}`` whose union covers the star, and the
 depot is a piece of its own. A tour enters region ``i`` at some point, which lies in one of
@@ -34,7 +39,9 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 import numpy.typing as npt
+from shapely.geometry import Polygon
 
+from urpt_gcs.solvers.order_bound import order_bound
 from urpt_gcs.solvers.regions import OuterStar, RegionSet
 from urpt_gcs.terrain import FloatArray
 
@@ -458,6 +465,15 @@ class Bound:
     rounds: int
     n_pieces: int
     seconds: float
+    # The order search (:mod:`urpt_gcs.solvers.order_bound`): nodes solved, left open, and
+    # whether it closed every node (then ``value`` is the optimum of the star relaxation,
+    # to the gap target).
+    order_nodes: int = 0
+    order_open: int = 0
+    order_finished: bool = False
+    # The shortest closed polyline the order search met that meets every set it bounded:
+    # a tour of the problem itself for discs and for polygons bounded with exact_shapes.
+    relaxed_tour_m: float = math.inf
 
 
 def lower_bound(
@@ -466,6 +482,7 @@ def lower_bound(
     time_limit_s: float,
     gap_target: float = 1e-4,
     method: str = "auto",
+    exact_shapes: bool = False,
 ) -> Bound:
     """A lower bound of every closed tour (through the depot, if any) entering every region.
 
@@ -481,10 +498,17 @@ def lower_bound(
     gap_target
         Stop once ``(upper - bound) / bound`` is at most this.
     method
-        ``exact`` or ``lagrangian`` for the relaxed problem; ``auto``: exact for a few
-        regions, else the Lagrangian and the exact optimum over a subset far apart.
+        ``auto`` or ``order``: branch and bound over visiting orders (:func:`order_bound`);
+        ``exact`` or ``lagrangian`` for the relaxed piece problem; ``pieces``: exact for a
+        few regions, else the Lagrangian and the exact optimum over a subset far apart.
+    exact_shapes
+        The polygons are the regions themselves, not only inside them: the order search
+        bounds the polygons (tighter than their outer stars). Leave it False when the outer
+        stars are the only sets known to hold the regions (regions on terrain).
     """
     started = time.perf_counter()
+    if method in ("auto", "order"):
+        return _order(regions, upper, time_limit_s, gap_target, exact_shapes)
     pieces, boundary = start_pieces(regions)
     skip = skipped_regions(regions)
     stars: list[OuterStar | None] = [s for s, k in zip(regions.outer, skip, strict=True) if not k]
@@ -494,7 +518,7 @@ def lower_bound(
     if m <= 1:
         return Bound(0.0, "single region", 0, pieces.n, 0.0)
     exact = m - 1 <= EXACT_MAX_REGIONS and _exact_work(pieces, m) <= _EXACT_WORK
-    exact = method == "exact" or (exact and method == "auto")
+    exact = method == "exact" or (exact and method == "pieces")
     mu = np.zeros(pieces.n)
     best = 0.0
     rounds = 0
@@ -514,7 +538,7 @@ def lower_bound(
         best = max(best, value)
         spent = time.perf_counter() - started
         # Without the exact optimum, half the time is kept for the subset bound.
-        own_limit = time_limit_s if exact or method != "auto" else 0.5 * time_limit_s
+        own_limit = time_limit_s if exact or method != "pieces" else 0.5 * time_limit_s
         if upper - best <= gap_target * best or spent >= own_limit or not used.any():
             break
         finer, parent = split(pieces, used, stars, boundary)
@@ -524,7 +548,7 @@ def lower_bound(
         # A half keeps its parent's multiplier: the bound at the old multipliers can only rise.
         mu = np.ascontiguousarray(mu[parent])
     method = "exact" if exact else "lagrangian"
-    if method == "auto" and not exact:
+    if method == "pieces" and not exact:
         left = time_limit_s - (time.perf_counter() - started)
         sub = subset_bound(regions, upper, max(left, 0.0), gap_target)
         if sub.value > best:
@@ -565,4 +589,25 @@ def subset_bound(
         outer=tuple(regions.outer[i] for i in chosen),
         depot_inside=tuple(False for _ in chosen),
     )
-    return lower_bound(sub, upper, time_limit_s, gap_target)
+    return lower_bound(sub, upper, time_limit_s, gap_target, method="pieces")
+
+
+def _order(
+    regions: RegionSet, upper: float, time_limit_s: float, gap_target: float, exact_shapes: bool
+) -> Bound:
+    started = time.perf_counter()
+    skip = skipped_regions(regions)
+    kept = np.flatnonzero(~skip)
+    stars: list[OuterStar | None] = [regions.outer[i] for i in kept]
+    shapes: list[Polygon | None] | None = None
+    if exact_shapes and regions.polygons is not None:
+        shapes = [regions.polygons[i] for i in kept]
+    if regions.depot_xy is not None:
+        stars.append(None)
+        if shapes is not None:
+            shapes.append(None)
+    found = order_bound(stars, regions.depot_xy, upper, time_limit_s, gap_target, shapes)
+    return Bound(
+        found.value, "order", 0, 0, time.perf_counter() - started,
+        found.nodes, found.open_nodes, found.finished, found.leaf_length,
+    )  # fmt: skip
