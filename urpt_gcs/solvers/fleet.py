@@ -1,0 +1,488 @@
+"""A fleet: K closed tours from their homes that between them see every target, the longest
+flight (the makespan) as short as it can be made, and a lower bound on that makespan.
+
+Each vehicle has its own instance (its layer's viewpoints and cover sets, its home as the
+depot) and its own flight model; a tour's time is the single-vehicle estimate, its stops cut
+into sorties within the vehicle's endurance where needed. The search starts from the naive
+split (the single-vehicle tour cut into K contiguous pieces of balanced time, each re-solved
+on its vehicle's layer) and then moves stops off the vehicle that lands last: a stop is taken
+out, the targets only it saw are put on another vehicle (the cheapest insertion of a viewpoint
+of that vehicle's layer seeing each), and the move is kept when both new flights are shorter
+than the old longest one. When no move helps, every vehicle's GTSP is re-solved on its targets
+(the ordinary solvers, a short budget each); if that shortens any flight, the moves go on.
+Every value compared is the time of a real tour over the vehicles' own candidates.
+
+Nothing here sees a raster: only instances, points, distances and the flight model.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from urpt_gcs.errors import PlanError, SettingsError
+from urpt_gcs.gtsp import Covers, Geometry, Instance
+from urpt_gcs.safety import FlightModel, split_sorties
+from urpt_gcs.solvers.base import SolveSettings
+from urpt_gcs.terrain import FloatArray
+
+IntArray = npt.NDArray[np.int64]
+
+# A move must shorten the flights it changes by this much to be kept.
+_EPS_S = 1e-6
+# Share of the time limit the single-vehicle tour may take; the rest goes to the fleet search.
+SINGLE_SHARE = 0.4
+# Budget of one vehicle's GTSP re-solve within the search, seconds.
+_RESOLVE_S = 0.3
+
+
+@dataclass(frozen=True, slots=True)
+class Vehicle:
+    """One vehicle of the fleet as the solver sees it.
+
+    ``instance`` holds the viewpoints of the vehicle's layer over every target, with its home
+    as the depot; ``altitude_rel_m`` is the layer's height above that home.
+    """
+
+    instance: Instance
+    model: FlightModel
+    altitude_rel_m: float
+    endurance_s: float | None
+
+    def __post_init__(self) -> None:
+        if self.instance.depot_xy is None or self.instance.points_xy is None:
+            raise ValueError("a fleet vehicle's instance needs its home (depot) and points")
+
+    @property
+    def home_xy(self) -> tuple[float, float]:
+        assert self.instance.depot_xy is not None
+        return self.instance.depot_xy
+
+    def time_s(self, stops_xy: FloatArray) -> float:
+        """Flight time of the stops flown in this order, as sorties within the endurance
+        (infinite when one stop alone does not fit)."""
+        if len(stops_xy) == 0:
+            return 0.0
+        names = [f"stop {k}" for k in range(1, len(stops_xy) + 1)]
+        try:
+            sorties = split_sorties(
+                stops_xy, self.home_xy, self.altitude_rel_m, self.model, self.endurance_s, names
+            )
+        except PlanError:
+            return math.inf
+        return math.fsum(s.flight_time_s for s in sorties)
+
+    def out_and_back_s(self, distance_m: FloatArray) -> FloatArray:
+        """The least flight time of any sortie that reaches a point ``distance_m`` from home
+        and stops there: take-off, a way out and a way back each at least that long (at the
+        faster of the cruise and return speeds), one stop, the landing."""
+        m = self.model
+        d = np.asarray(distance_m, dtype=np.float64)
+        fastest = np.minimum(m.leg_s(d), m.return_s(d))
+        ends = m.takeoff_s(self.altitude_rel_m) + m.landing_s(self.altitude_rel_m)
+        out: FloatArray = ends + m.stop_s + 2.0 * fastest
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class FleetTours:
+    """The fleet's tours: per vehicle, viewpoints of its own instance in flight order, the
+    targets it is counted for and its flight time. ``naive_times_s`` are the naive split's
+    pieces flown as cut (on the reference instance's viewpoints), ``start_times_s`` the same
+    pieces re-solved on each vehicle's own layer, where the search starts."""
+
+    orders: tuple[tuple[int, ...], ...]
+    targets: tuple[tuple[int, ...], ...]
+    times_s: tuple[float, ...]
+    naive_times_s: tuple[float, ...]
+    start_times_s: tuple[float, ...]
+    moves: int
+    resolves: int
+    search_s: float
+
+    @property
+    def makespan_s(self) -> float:
+        return max(self.times_s)
+
+    @property
+    def naive_makespan_s(self) -> float:
+        return max(self.naive_times_s)
+
+
+@dataclass(frozen=True, slots=True)
+class MakespanBound:
+    """A lower bound on the makespan of any fleet plan, and its two parts."""
+
+    reach_s: float
+    share_s: float
+
+    @property
+    def bound_s(self) -> float:
+        return max(self.reach_s, self.share_s)
+
+
+def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntArray]:
+    """The instance over ``targets`` only (renumbered 0..len-1 in the given order), and the
+    original index of each viewpoint it keeps (those that see one of them)."""
+    keep_t = np.asarray(targets, dtype=np.int64)
+    if keep_t.size == 0:
+        raise ValueError("restrict needs at least one target")
+    new_of = np.full(instance.n_targets, -1, dtype=np.int64)
+    new_of[keep_t] = np.arange(keep_t.size)
+    vp, tg = instance.covers.pairs()
+    mask = new_of[tg] >= 0
+    kept = np.unique(vp[mask])
+    vp_new = np.searchsorted(kept, vp[mask])
+    covers = Covers.from_pairs(vp_new, new_of[tg[mask]], kept.size, keep_t.size)
+    g = instance.geometry
+    geometry = (
+        None
+        if g is None
+        else Geometry(
+            targets_xy=g.targets_xy[keep_t],
+            ground_m=g.ground_m[keep_t],
+            altitude_m=g.altitude_m,
+            fov_deg=g.fov_deg,
+            terrain_max_m=g.terrain_max_m,
+        )
+    )
+    oracle = instance.oracle
+    sub_oracle = None
+    if oracle is not None:
+
+        def sub_oracle(points_xy: FloatArray) -> npt.NDArray[np.bool_]:
+            assert oracle is not None
+            return oracle(points_xy)[:, keep_t]
+
+    depot_distance = None if instance.depot_distance is None else instance.depot_distance[:, kept]
+    owner = None if instance.owner is None else new_of[instance.owner[kept]]
+    sub = Instance(
+        covers=covers,
+        distance=None if instance.distance is None else instance.distance[np.ix_(kept, kept)],
+        depot_distance=depot_distance,
+        points_xy=None if instance.points_xy is None else instance.points_xy[kept],
+        depot_xy=instance.depot_xy,
+        owner=owner,
+        geometry=geometry,
+        oracle=sub_oracle,
+        name=instance.name,
+        heading_deg=None if instance.heading_deg is None else instance.heading_deg[kept],
+    )
+    return sub, kept
+
+
+def with_home(instance: Instance, home_xy: tuple[float, float]) -> Instance:
+    """The same viewpoints with another depot (a vehicle of the same layer at another home)."""
+    assert instance.points_xy is not None
+    pts = instance.points_xy
+    to_home = np.hypot(pts[:, 0] - home_xy[0], pts[:, 1] - home_xy[1])
+    return Instance(
+        covers=instance.covers,
+        depot_distance=np.vstack([to_home, to_home]),
+        points_xy=pts,
+        depot_xy=(float(home_xy[0]), float(home_xy[1])),
+        owner=instance.owner,
+        geometry=instance.geometry,
+        oracle=instance.oracle,
+        name=instance.name,
+        heading_deg=instance.heading_deg,
+    )
+
+
+def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) -> MakespanBound:
+    """A lower bound on the makespan of any plan in which the vehicles between them see
+    every target.
+
+    ``reach_s``: some vehicle sees each target ``t``, from a point of its layer's region of
+    ``t``, which lies within the cone radius of ``t`` (the instance geometry's
+    ``cone_radius_m``, the widest the camera reaches). So that vehicle flies a sortie out to a
+    point at least ``d_k(t) = max(|home_k - t| - r_k(t), 0)`` from its home, stops there and
+    comes back: by :meth:`Vehicle.out_and_back_s` (a rest-to-rest leg's time is increasing
+    and concave in its length with time 0 at length 0, so it is subadditive and a chain of
+    legs of total length at least ``d`` takes at least the time of one leg of length ``d``;
+    the faster of the two speeds bounds either). The makespan is at least
+    ``max_t min_k out_and_back_k(d_k(t))``.
+
+    ``share_s``: ``single_bound_m`` bounds the length of any one closed tour from the first
+    vehicle's home ``h_1`` that sees every target, from any layer the vehicles fly (the
+    caller's duty: the bound of the widest regions). The vehicles that fly, their sorties
+    joined at their homes and each home joined to ``h_1`` by a return trip, form such a tour,
+    so their lengths add up to at least ``single_bound_m - 2 sum_k |h_1 - h_k|``. A leg takes
+    at least its length over the vehicle's top speed, and every vehicle that flies takes off
+    and lands at least once; the longest of K' <= K flights is at least their mean, so the
+    makespan is at least ``min_k (takeoff_k + landing_k) + length / (K v_max)``.
+    """
+    if not vehicles:
+        raise ValueError("makespan_bound needs at least one vehicle")
+    geometry = [v.instance.geometry for v in vehicles]
+    reach = 0.0
+    if all(g is not None for g in geometry):
+        per_vehicle = []
+        for vehicle, g in zip(vehicles, geometry, strict=True):
+            assert g is not None
+            hx, hy = vehicle.home_xy
+            d = np.hypot(g.targets_xy[:, 0] - hx, g.targets_xy[:, 1] - hy)
+            per_vehicle.append(vehicle.out_and_back_s(np.maximum(d - g.cone_radius_m, 0.0)))
+        reach = float(np.min(np.vstack(per_vehicle), axis=0).max())
+    share = 0.0
+    if single_bound_m is not None and single_bound_m > 0.0:
+        h1 = np.asarray(vehicles[0].home_xy)
+        joins = math.fsum(2.0 * float(np.hypot(*(np.asarray(v.home_xy) - h1))) for v in vehicles)
+        length = max(single_bound_m - joins, 0.0)
+        top = max(max(v.model.cruise_m_s, v.model.return_m_s) for v in vehicles)
+        ends = min(
+            v.model.takeoff_s(v.altitude_rel_m) + v.model.landing_s(v.altitude_rel_m)
+            for v in vehicles
+        )
+        share = ends + length / (len(vehicles) * top)
+    return MakespanBound(reach_s=reach, share_s=share)
+
+
+class _Route:
+    """One vehicle's stops (viewpoints of its instance, in flight order) and its time."""
+
+    def __init__(self, vehicle: Vehicle, order: list[int]) -> None:
+        self.vehicle = vehicle
+        inst = vehicle.instance
+        assert inst.points_xy is not None
+        self.points = inst.points_xy
+        self.order = order
+        self.time_s = vehicle.time_s(self.points[order])
+
+    def seen(self) -> npt.NDArray[np.bool_]:
+        return self.vehicle.instance.covers.seen(self.order)
+
+
+def _viewpoints_by_target(instance: Instance) -> list[IntArray]:
+    vp, tg = instance.covers.pairs()
+    by = np.argsort(tg, kind="stable")
+    bounds = np.searchsorted(tg[by], np.arange(instance.n_targets + 1))
+    return [vp[by[bounds[t] : bounds[t + 1]]] for t in range(instance.n_targets)]
+
+
+def _insert(route: _Route, order: list[int], candidates: IntArray) -> list[int]:
+    """``order`` with the candidate of least added distance at its cheapest place."""
+    home = np.asarray(route.vehicle.home_xy)
+    path = np.vstack([home, route.points[order], home]) if order else np.vstack([home, home])
+    a, b = path[:-1], path[1:]
+    c = route.points[candidates]
+    ab = np.hypot(*(b - a).T)
+    ac = np.hypot(c[:, None, 0] - a[None, :, 0], c[:, None, 1] - a[None, :, 1])
+    cb = np.hypot(c[:, None, 0] - b[None, :, 0], c[:, None, 1] - b[None, :, 1])
+    added = ac + cb - ab[None, :]
+    i, pos = np.unravel_index(int(np.argmin(added)), added.shape)
+    return [*order[:pos], int(candidates[i]), *order[pos:]]
+
+
+def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
+    """Cut points ``0 = c_0 <= ... <= c_K = n`` of the stops into K contiguous pieces, piece
+    ``k`` flown by vehicle ``k`` in the given order from its home, the longest flight least.
+
+    A piece's time only grows as it takes in more stops at either end, so for a given longest
+    flight the greedy cut (each vehicle in turn takes all it can) decides whether one exists;
+    the least such longest flight is found by bisection between the pieces' times.
+    """
+    n = len(stops_xy)
+
+    def greedy(limit_s: float) -> list[int] | None:
+        cuts = [0]
+        for vehicle in vehicles:
+            lo, hi = cuts[-1], n  # the piece lo..j-1 fits for j = lo; find the largest j
+            while lo < hi:
+                mid = (lo + hi + 1) // 2
+                if vehicle.time_s(stops_xy[cuts[-1] : mid]) <= limit_s:
+                    lo = mid
+                else:
+                    hi = mid - 1
+            cuts.append(lo)
+        return cuts if cuts[-1] == n else None
+
+    low, high = 0.0, vehicles[0].time_s(stops_xy)
+    if greedy(high) is None:
+        high = max(v.time_s(stops_xy) for v in vehicles)
+    found = greedy(high)
+    if found is None or not math.isfinite(high):
+        raise SettingsError(
+            "no split of the targets among the vehicles fits every vehicle's endurance: "
+            "raise the endurance in --fleet or --endurance, or add vehicles"
+        )
+    while high - low > max(1e-3, 1e-6 * high):
+        mid = 0.5 * (low + high)
+        cuts = greedy(mid)
+        if cuts is None:
+            low = mid
+        else:
+            high, found = mid, cuts
+    return found
+
+
+def naive_split(
+    vehicles: Sequence[Vehicle], single_order: Sequence[int], reference: Instance
+) -> tuple[list[list[int]], list[float]]:
+    """The single-vehicle tour (viewpoints of ``reference``) cut into K contiguous pieces of
+    least longest flight, each flown as cut from its vehicle's home: per vehicle the targets
+    first seen in its piece, and the pieces' flight times."""
+    assert reference.points_xy is not None
+    stops = reference.points_xy[list(single_order)]
+    cuts = _naive_cut(vehicles, stops)
+    covers = reference.covers.dense(list(single_order))
+    first_seen = np.argmax(covers, axis=0)
+    pieces, times = [], []
+    for k, vehicle in enumerate(vehicles):
+        lo, hi = cuts[k], cuts[k + 1]
+        pieces.append([int(t) for t in np.flatnonzero((first_seen >= lo) & (first_seen < hi))])
+        times.append(vehicle.time_s(stops[lo:hi]))
+    return pieces, times
+
+
+def plan_fleet(
+    vehicles: Sequence[Vehicle],
+    single_order: Sequence[int],
+    reference: Instance,
+    solver: str,
+    settings: SolveSettings,
+) -> FleetTours:
+    """Tours for the fleet of least makespan found within ``settings.time_limit_s``.
+
+    Parameters
+    ----------
+    vehicles
+        The fleet; every instance covers the same targets, in the same numbering.
+    single_order
+        The single-vehicle tour (viewpoints of ``reference``), the start of the search.
+    reference
+        The instance the single-vehicle tour was solved on.
+    solver
+        The GTSP solver for each vehicle's re-solve (any that returns instance viewpoints).
+    settings
+        The search's time limit and seed.
+    """
+    from urpt_gcs.solvers import solve
+
+    started = time.perf_counter()
+    deadline = started + settings.time_limit_s
+    pieces, naive_times = naive_split(vehicles, single_order, reference)
+    if any(not piece for piece in pieces):
+        raise SettingsError(
+            f"{len(vehicles)} vehicles for {reference.n_targets} targets leaves a vehicle "
+            "nothing to photograph: use fewer vehicles (--vehicles or --fleet)"
+        )
+    by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
+    resolves = 0
+
+    def resolve(k: int, targets: list[int], budget_s: float) -> list[int]:
+        nonlocal resolves
+        resolves += 1
+        sub, kept = restrict(vehicles[k].instance, targets)
+        tour = solve(sub, solver, SolveSettings(time_limit_s=budget_s, seed=settings.seed))
+        if any(v < 0 for v in tour.order):
+            raise SettingsError(
+                f"--solver {solver} places its own stops, which a fleet cannot share out: "
+                "use --solver auto, exact, heuristic or ortools"
+            )
+        return [int(kept[v]) for v in tour.order]
+
+    budget = max(0.05, min(_RESOLVE_S, settings.time_limit_s / (4 * len(vehicles))))
+    routes = [_Route(v, resolve(k, pieces[k], budget)) for k, v in enumerate(vehicles)]
+    start_times = tuple(r.time_s for r in routes)
+    moves = 0
+    while time.perf_counter() < deadline:
+        moved = _move_stops(routes, by_target, deadline)
+        moves += moved
+        improved = False
+        for k, route in enumerate(routes):
+            if time.perf_counter() >= deadline:
+                break
+            mine = _own_targets(routes, k)
+            if not mine:
+                continue
+            order = resolve(k, mine, budget)
+            t = route.vehicle.time_s(route.points[order])
+            if t < route.time_s - _EPS_S:
+                route.order, route.time_s = order, t
+                improved = True
+        if not (improved or moved):
+            break
+    owners = _owners(routes)
+    return FleetTours(
+        orders=tuple(tuple(r.order) for r in routes),
+        targets=tuple(
+            tuple(int(t) for t in np.flatnonzero(owners == k)) for k in range(len(routes))
+        ),
+        times_s=tuple(r.time_s for r in routes),
+        naive_times_s=tuple(naive_times),
+        start_times_s=start_times,
+        moves=moves,
+        resolves=resolves,
+        search_s=time.perf_counter() - started,
+    )
+
+
+def _owners(routes: list[_Route]) -> IntArray:
+    """Which vehicle each target is counted for: the first whose stops see it, except that
+    a vehicle left with none takes one it sees from a vehicle that has several."""
+    seen = np.vstack([r.seen() for r in routes])
+    if not seen.any(axis=0).all():
+        raise PlanError("internal check failed: the fleet's tours miss a target; report this")
+    owners: IntArray = np.argmax(seen, axis=0).astype(np.int64)
+    for k in range(len(routes)):
+        counts = np.bincount(owners, minlength=len(routes))
+        if counts[k] == 0:
+            spare = np.flatnonzero(seen[k] & (counts[owners] > 1))
+            if spare.size:
+                owners[spare[0]] = k
+    return owners
+
+
+def _own_targets(routes: list[_Route], k: int) -> list[int]:
+    return [int(t) for t in np.flatnonzero(_owners(routes) == k)]
+
+
+def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline: float) -> int:
+    """Move stops off the vehicle that lands last while that shortens it without making any
+    other flight as long; the number of moves made."""
+    moves = 0
+    while time.perf_counter() < deadline:
+        c = int(np.argmax([r.time_s for r in routes]))
+        worst = routes[c].time_s
+        if len(routes[c].order) <= 1:
+            return moves
+        seen_elsewhere = np.zeros(routes[c].vehicle.instance.n_targets, dtype=bool)
+        for k, r in enumerate(routes):
+            if k != c:
+                seen_elsewhere |= r.seen()
+        best: tuple[float, int, list[int], list[int]] | None = None
+        covers = routes[c].vehicle.instance.covers
+        for i, stop in enumerate(routes[c].order):
+            rest = routes[c].order[:i] + routes[c].order[i + 1 :]
+            left = covers.seen(rest) | seen_elsewhere
+            orphans = [int(t) for t in covers.target[covers.ptr[stop] : covers.ptr[stop + 1]]]
+            orphans = [t for t in orphans if not left[t]]
+            rest_s = routes[c].vehicle.time_s(routes[c].points[rest])
+            if rest_s >= worst - _EPS_S:
+                continue
+            for j, other in enumerate(routes):
+                if j == c:
+                    continue
+                order = list(other.order)
+                have = other.seen()
+                for t in orphans:
+                    if not have[t]:
+                        order = _insert(other, order, by_target[j][t])
+                        have = other.vehicle.instance.covers.seen(order)
+                other_s = other.vehicle.time_s(other.points[order])
+                value = max(rest_s, other_s)
+                if value < worst - _EPS_S and (best is None or value < best[0]):
+                    best = (value, j, rest, order)
+        if best is None:
+            return moves
+        _, j, rest, order = best
+        routes[c].order, routes[c].time_s = rest, routes[c].vehicle.time_s(routes[c].points[rest])
+        routes[j].order, routes[j].time_s = order, routes[j].vehicle.time_s(routes[j].points[order])
+        moves += 1
+    return moves
