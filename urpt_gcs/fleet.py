@@ -231,6 +231,7 @@ class Separation:
     start_delays_s: tuple[float, ...]
     closest: Closest | None
     closest_latlon: tuple[float, float] | None
+    closest_horizontal_m: float | None
 
 
 @dataclass(frozen=True, slots=True)
@@ -684,7 +685,8 @@ def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separ
         for j in range(i + 1, len(tracks))
         if (c := _pair_closest(tracks, i, j)) is not None
     ]
-    least = min(found, key=lambda c: _value(c, horizontal), default=None)
+    least = min(found, key=lambda c: c.distance_m, default=None)
+    flat = min((c.horizontal_m for c in found), default=None)
     where = None if least is None else _latlon(site.crs, np.array([least.where_xy]))[0]
     return Separation(
         mode=fleet.separation,
@@ -693,6 +695,7 @@ def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separ
         start_delays_s=tuple(delays),
         closest=least,
         closest_latlon=where,
+        closest_horizontal_m=flat,
     )
 
 
