@@ -333,7 +333,11 @@ def plan_fleet_mission(
     budget = settings.solve.time_limit_s - single_s
     stages.say(f"sharing the targets among {len(vehicles)} vehicles (up to {budget:.1f} s)")
     tours = plan_fleet(
-        vehicles, single.order, reference, solver, SolveSettings(budget, settings.solve.seed)
+        vehicles,
+        single.order,
+        reference,
+        settings.solver,
+        SolveSettings(budget, settings.solve.seed),
     )
     stages.lap("fleet")
     idle = [k + 1 for k, share in enumerate(tours.targets) if not share]

@@ -358,11 +358,12 @@ def plan_fleet(
     reference
         The instance the single-vehicle tour was solved on.
     solver
-        The GTSP solver for each vehicle's re-solve (any that returns instance viewpoints).
+        The GTSP solver for each vehicle's re-solve (any that returns instance viewpoints;
+        ``auto`` picks per vehicle).
     settings
         The search's time limit and seed.
     """
-    from urpt_gcs.solvers import solve
+    from urpt_gcs.solvers import choose, prepare, solve
 
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
@@ -379,7 +380,9 @@ def plan_fleet(
         nonlocal resolves
         resolves += 1
         sub, kept = restrict(vehicles[k].instance, targets)
-        tour = solve(sub, solver, SolveSettings(time_limit_s=budget_s, seed=settings.seed))
+        name = choose(sub, solver)
+        prepare(name)
+        tour = solve(sub, name, SolveSettings(time_limit_s=budget_s, seed=settings.seed))
         if any(v < 0 for v in tour.order):
             raise SettingsError(
                 f"--solver {solver} places its own stops, which a fleet cannot share out: "
