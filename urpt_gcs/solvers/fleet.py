@@ -287,24 +287,31 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
     flight the greedy cut (each vehicle in turn takes all it can) decides whether one exists;
     the least such longest flight is found by bisection between the pieces' times.
     """
-    n = len(stops_xy)
+    n, count = len(stops_xy), len(vehicles)
+    # Every vehicle gets a stop while there are enough to go round.
+    least = 1 if n >= count else 0
 
     def greedy(limit_s: float) -> list[int] | None:
         cuts = [0]
-        for vehicle in vehicles:
-            lo, hi = cuts[-1], n  # the piece lo..j-1 fits for j = lo; find the largest j
+        for k, vehicle in enumerate(vehicles):
+            first = cuts[-1]
+            lo, hi = first, n - least * (count - k - 1)
+            if hi < first + least:
+                return None
+            # The largest j whose piece first .. j - 1 fits; a piece only grows with j.
             while lo < hi:
                 mid = (lo + hi + 1) // 2
-                if vehicle.time_s(stops_xy[cuts[-1] : mid]) <= limit_s:
+                if vehicle.time_s(stops_xy[first:mid]) <= limit_s:
                     lo = mid
                 else:
                     hi = mid - 1
+            if lo < first + least:
+                return None
             cuts.append(lo)
         return cuts if cuts[-1] == n else None
 
-    low, high = 0.0, vehicles[0].time_s(stops_xy)
-    if greedy(high) is None:
-        high = max(v.time_s(stops_xy) for v in vehicles)
+    # At the longest single flight of the whole tour every vehicle's piece fits.
+    low, high = 0.0, max(v.time_s(stops_xy) for v in vehicles)
     found = greedy(high)
     if found is None or not math.isfinite(high):
         raise SettingsError(
@@ -368,11 +375,6 @@ def plan_fleet(
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
     pieces, naive_times = naive_split(vehicles, single_order, reference)
-    if any(not piece for piece in pieces):
-        raise SettingsError(
-            f"{len(vehicles)} vehicles for {reference.n_targets} targets leaves a vehicle "
-            "nothing to photograph: use fewer vehicles (--vehicles or --fleet)"
-        )
     by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
     resolves = 0
 
@@ -391,7 +393,10 @@ def plan_fleet(
         return [int(kept[v]) for v in tour.order]
 
     budget = max(0.05, min(_RESOLVE_S, settings.time_limit_s / (4 * len(vehicles))))
-    routes = [_Route(v, resolve(k, pieces[k], budget)) for k, v in enumerate(vehicles)]
+    routes = [
+        _Route(v, resolve(k, pieces[k], budget) if pieces[k] else [])
+        for k, v in enumerate(vehicles)
+    ]
     start_times = tuple(r.time_s for r in routes)
     moves = 0
     while time.perf_counter() < deadline:
