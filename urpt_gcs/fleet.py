@@ -71,6 +71,8 @@ SeparationMode = Literal["altitude", "time"]
 SEPARATION_MODES = ("altitude", "time")
 # Start delays are searched in whole steps of this, up to the undelayed makespan.
 DELAY_STEP_S = 5.0
+# The longest start delay, as a share of the longest flight; beyond it the plan is refused.
+MAX_DELAY_SHARE = 0.5
 # Each vehicle's written altitude is rounded to whole centimetres (home down, height up): the
 # layers as written may come this much closer than the spacing asked for.
 _WRITTEN_ROUNDING_M = 0.05
@@ -641,12 +643,13 @@ def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separ
     Vehicles are taken in turn; each starts at the first step of :data:`DELAY_STEP_S` at
     which its track stays ``min_m`` from every earlier vehicle's while both fly (3-D in
     altitude mode, less the written altitudes' rounding; horizontal in time mode). None up to
-    the undelayed makespan: refused, naming the pair, where and when.
+    :data:`MAX_DELAY_SHARE` of the longest flight: refused, naming the pair, where and when.
     """
     base = [track(p) for p in plans]
     horizontal = fleet.separation == "time"
     need = fleet.min_m - (0.0 if horizontal else _WRITTEN_ROUNDING_M)
-    cap = max(p.flight_time_s for p in plans)
+    # A vehicle held back longer than half the longest flight is all but flying in turn.
+    cap = MAX_DELAY_SHARE * max(p.flight_time_s for p in plans)
     delays = [0.0]
 
     def apart(k: int, delay: float) -> Closest | None:
