@@ -280,6 +280,62 @@ class _Layer:
     instance: Instance
 
 
+@dataclass(frozen=True, slots=True)
+class FleetProblem:
+    """What the fleet's solver works on: every vehicle's layer and instance, and the
+    reference instance (the highest layer's viewpoints, from the first vehicle's home) the
+    single-vehicle tour is solved on."""
+
+    site: _Site
+    layers: tuple[_Layer, ...]
+    vehicles: tuple[Vehicle, ...]
+    reference: Instance
+    gsd_cm: float | None
+
+    @property
+    def monotone(self) -> bool:
+        """Whether the reference's single-vehicle bound holds for every layer.
+
+        A higher plane sees every target from wherever a lower one does (its lines of sight
+        lie above the lower ones, its cone is wider), so the highest layer's bound holds for
+        all of them; a GSD cap breaks that (a higher eye is farther away).
+        """
+        altitudes = {round(layer.area.camera.altitude_m, 6) for layer in self.layers}
+        return len(altitudes) == 1 or self.gsd_cm is None
+
+
+def fleet_problem(
+    dem_path: Path,
+    targets_path: Path,
+    settings: PlanSettings,
+    fleet: FleetSettings,
+    stages: _Stages | None = None,
+) -> FleetProblem:
+    """Read the site and build every vehicle's layer, regions and viewpoints."""
+    stages = stages or _Stages(None)
+    stages.say("reading targets")
+    site = _read_site(dem_path, targets_path, settings)
+    stages.lap("targets")
+    if len(fleet.vehicles) > len(site.names):
+        raise SettingsError(
+            f"{len(fleet.vehicles)} vehicles for {len(site.names)} targets leaves a vehicle "
+            "nothing to photograph: use fewer vehicles (--vehicles or --fleet)"
+        )
+    layers = _layers(site, settings, fleet, stages)
+    top = max(range(len(layers)), key=lambda k: layers[k].area.camera.altitude_m)
+    vehicles = tuple(
+        Vehicle(
+            layer.instance,
+            flight_model(layer.settings),
+            _altitude_rel(layer.area),
+            None if layer.settings.endurance_min is None else layer.settings.endurance_min * 60.0,
+        )
+        for layer in layers
+    )
+    reference = with_home(layers[top].instance, vehicles[0].home_xy)
+    return FleetProblem(site, tuple(layers), vehicles, reference, settings.gsd_cm)
+
+
 def plan_fleet_mission(
     dem_path: Path,
     targets_path: Path,
@@ -299,26 +355,8 @@ def plan_fleet_mission(
         Called with a short message as each stage starts.
     """
     stages = _Stages(progress)
-    stages.say("reading targets")
-    site = _read_site(dem_path, targets_path, settings)
-    stages.lap("targets")
-    if len(fleet.vehicles) > len(site.names):
-        raise SettingsError(
-            f"{len(fleet.vehicles)} vehicles for {len(site.names)} targets leaves a vehicle "
-            "nothing to photograph: use fewer vehicles (--vehicles or --fleet)"
-        )
-    layers = _layers(site, settings, fleet, stages)
-    top = max(range(len(layers)), key=lambda k: layers[k].area.camera.altitude_m)
-    vehicles = [
-        Vehicle(
-            layer.instance,
-            flight_model(layer.settings),
-            _altitude_rel(layer.area),
-            None if layer.settings.endurance_min is None else layer.settings.endurance_min * 60.0,
-        )
-        for layer in layers
-    ]
-    reference = with_home(layers[top].instance, vehicles[0].home_xy)
+    problem = fleet_problem(dem_path, targets_path, settings, fleet, stages)
+    layers, vehicles, reference = problem.layers, list(problem.vehicles), problem.reference
     solver = choose(reference, settings.solver)
     stages.say(f"preparing the {solver} solver (compiled on first use)")
     prepare(solver)
@@ -348,15 +386,10 @@ def plan_fleet_mission(
             f"vehicle {idle[0]} has nothing left to photograph (the others' stops see all its "
             "targets): use fewer vehicles (--vehicles or --fleet)"
         )
-    altitudes = {round(layer.area.camera.altitude_m, 6) for layer in layers}
-    # A higher plane sees every target from wherever a lower one does (its lines of sight
-    # lie above the lower ones, its cone is wider), so the top layer's single-vehicle bound
-    # holds for every layer; a GSD cap breaks that (a higher eye is farther away).
-    monotone = len(altitudes) == 1 or settings.gsd_cm is None
-    bound = makespan_bound(vehicles, single.lower_bound if monotone else None)
+    bound = makespan_bound(vehicles, single.lower_bound if problem.monotone else None)
     plans = tuple(_vehicle_plan(k, layer, tours, solver, stages) for k, layer in enumerate(layers))
     stages.say("checking separation along the planned tracks")
-    separation = _separate(plans, fleet, site)
+    separation = _separate(plans, fleet, problem.site)
     stages.lap("separation")
     result = FleetPlan(
         settings=settings,
@@ -716,6 +749,7 @@ __all__ = [
     "Separation",
     "VehicleSpec",
     "closest",
+    "fleet_problem",
     "plan_fleet_mission",
     "read_fleet",
     "track",

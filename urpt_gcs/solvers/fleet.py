@@ -194,6 +194,37 @@ def with_home(instance: Instance, home_xy: tuple[float, float]) -> Instance:
     )
 
 
+# Above this many targets the spanning-tree bound (a dense matrix) is left out.
+TREE_BOUND_MAX_TARGETS = 3000
+
+
+def tree_bound_m(
+    targets_xy: FloatArray, radius_m: FloatArray, home_xy: tuple[float, float]
+) -> float:
+    """A lower bound on the total length of closed tours from ``home_xy`` that between them
+    pass within ``radius_m[t]`` of every target ``t``.
+
+    Let ``p_t`` be where target ``t`` is seen. The tours, all through home, form a connected
+    graph through home and every ``p_t``, so their total length is at least the minimum
+    spanning tree of those points; and ``|p_i - p_j| >= |c_i - c_j| - r_i - r_j``, so that tree
+    weighs at least the minimum spanning tree of the centres under those shortened (never
+    negative) distances. None beyond :data:`TREE_BOUND_MAX_TARGETS` targets.
+    """
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
+    m = len(targets_xy)
+    if m == 0 or m > TREE_BOUND_MAX_TARGETS:
+        return 0.0
+    xy = np.vstack([np.asarray(home_xy, dtype=np.float64)[None, :], targets_xy])
+    r = np.concatenate([[0.0], np.asarray(radius_m, dtype=np.float64)])
+    d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    w = np.maximum(d - r[:, None] - r[None, :], 0.0)
+    # The sparse routine reads a zero as no edge: a hair above it keeps every edge.
+    w = np.where(w > 0.0, w, 1e-12)
+    np.fill_diagonal(w, 0.0)
+    return max(float(minimum_spanning_tree(w).sum()) - 1e-9 * m, 0.0)
+
+
 def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) -> MakespanBound:
     """A lower bound on the makespan of any plan in which the vehicles between them see
     every target.
@@ -208,19 +239,30 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
     the faster of the two speeds bounds either). The makespan is at least
     ``max_t min_k out_and_back_k(d_k(t))``.
 
-    ``share_s``: ``single_bound_m`` bounds the length of any one closed tour from the first
-    vehicle's home ``h_1`` that sees every target, from any layer the vehicles fly (the
-    caller's duty: the bound of the widest regions). The vehicles that fly, their sorties
-    joined at their homes and each home joined to ``h_1`` by a return trip, form such a tour,
-    so their lengths add up to at least ``single_bound_m - 2 sum_k |h_1 - h_k|``. A leg takes
-    at least its length over the vehicle's top speed, and every vehicle that flies takes off
-    and lands at least once; the longest of K' <= K flights is at least their mean, so the
-    makespan is at least ``min_k (takeoff_k + landing_k) + length / (K v_max)``.
+    ``share_s``: the total length ``L`` of all the vehicles' flights, with ``J`` the sum of
+    the homes' distances from the first vehicle's home ``h_1``, is at least
+    ``single_bound_m - 2 J`` (the flights joined at their homes, each home joined to ``h_1``
+    by a return trip, make one closed tour from ``h_1`` that sees every target:
+    ``single_bound_m`` bounds any such tour, from any layer flown, which is the caller's to
+    ensure) and at least :func:`tree_bound_m` from ``h_1`` less ``J`` (every home joined to
+    ``h_1`` once), at the widest cone over the layers. A sortie's way home is no longer
+    than its way out to its last stop, so at most half of a sortie is flown at the return
+    speed and the rest at the cruise speed, each leg no faster than its length over its
+    speed. No point sees two targets whose cones of the widest radius are disjoint, so there
+    are at least as many stops as a greedy set of such targets holds, each costing its hold.
+    Those legs and stops, ``W`` seconds in all, are shared by at most K vehicles: one of them
+    flies at least ``W / K``, with a take-off and landing for each sortie, and with an
+    endurance ``E`` a sortie holds at most ``E - ends`` of it, so that vehicle's flight is at
+    least ``max(ends + W / K, W / K * E / (E - ends))`` (the least of these over the vehicles'
+    models).
     """
+    from urpt_gcs.solvers.base import greedy_disjoint
+
     if not vehicles:
         raise ValueError("makespan_bound needs at least one vehicle")
     geometry = [v.instance.geometry for v in vehicles]
     reach = 0.0
+    radius = None
     if all(g is not None for g in geometry):
         per_vehicle = []
         for vehicle, g in zip(vehicles, geometry, strict=True):
@@ -229,18 +271,41 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
             d = np.hypot(g.targets_xy[:, 0] - hx, g.targets_xy[:, 1] - hy)
             per_vehicle.append(vehicle.out_and_back_s(np.maximum(d - g.cone_radius_m, 0.0)))
         reach = float(np.min(np.vstack(per_vehicle), axis=0).max())
+        radius = np.max(np.vstack([g.cone_radius_m for g in geometry if g is not None]), axis=0)
+    h1 = np.asarray(vehicles[0].home_xy)
+    joins = math.fsum(float(np.hypot(*(np.asarray(v.home_xy) - h1))) for v in vehicles)
+    length = 0.0
+    if single_bound_m is not None:
+        length = max(length, single_bound_m - 2.0 * joins)
+    stops = 0
+    g0 = geometry[0]
+    if radius is not None and g0 is not None:
+        length = max(length, tree_bound_m(g0.targets_xy, radius, vehicles[0].home_xy) - joins)
+        stops = len(greedy_disjoint(g0.targets_xy, float(radius.max())))
+    per_m = min(_seconds_per_metre(v.model) for v in vehicles)
+    work = per_m * length + stops * min(v.model.stop_s for v in vehicles)
     share = 0.0
-    if single_bound_m is not None and single_bound_m > 0.0:
-        h1 = np.asarray(vehicles[0].home_xy)
-        joins = math.fsum(2.0 * float(np.hypot(*(np.asarray(v.home_xy) - h1))) for v in vehicles)
-        length = max(single_bound_m - joins, 0.0)
-        top = max(max(v.model.cruise_m_s, v.model.return_m_s) for v in vehicles)
-        ends = min(
+    if work > 0.0:
+        each = work / len(vehicles)
+        ends = [
             v.model.takeoff_s(v.altitude_rel_m) + v.model.landing_s(v.altitude_rel_m)
             for v in vehicles
+        ]
+        factor = min(
+            e / (e - end) if e is not None and e > end else 1.0
+            for e, end in zip((v.endurance_s for v in vehicles), ends, strict=True)
         )
-        share = ends + length / (len(vehicles) * top)
+        share = max(min(ends) + each, factor * each)
     return MakespanBound(reach_s=reach, share_s=share)
+
+
+def _seconds_per_metre(model: FlightModel) -> float:
+    """The least time a metre of flight can take: at most half of it at the return speed
+    (a sortie's way home is no longer than its way out), the rest at the cruise speed."""
+    cruise, back = model.cruise_m_s, model.return_m_s
+    if back <= cruise:
+        return 1.0 / cruise
+    return 0.5 * (1.0 / cruise + 1.0 / back)
 
 
 class _Route:
@@ -330,21 +395,22 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
 
 def naive_split(
     vehicles: Sequence[Vehicle], single_order: Sequence[int], reference: Instance
-) -> tuple[list[list[int]], list[float]]:
+) -> tuple[list[list[int]], list[float], list[list[int]]]:
     """The single-vehicle tour (viewpoints of ``reference``) cut into K contiguous pieces of
     least longest flight, each flown as cut from its vehicle's home: per vehicle the targets
-    first seen in its piece, and the pieces' flight times."""
+    first seen in its piece, the pieces' flight times and the pieces themselves."""
     assert reference.points_xy is not None
     stops = reference.points_xy[list(single_order)]
     cuts = _naive_cut(vehicles, stops)
     covers = reference.covers.dense(list(single_order))
     first_seen = np.argmax(covers, axis=0)
-    pieces, times = [], []
+    pieces, times, cut = [], [], []
     for k, vehicle in enumerate(vehicles):
         lo, hi = cuts[k], cuts[k + 1]
         pieces.append([int(t) for t in np.flatnonzero((first_seen >= lo) & (first_seen < hi))])
         times.append(vehicle.time_s(stops[lo:hi]))
-    return pieces, times
+        cut.append([int(v) for v in single_order[lo:hi]])
+    return pieces, times, cut
 
 
 def plan_fleet(
@@ -374,7 +440,7 @@ def plan_fleet(
 
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
-    pieces, naive_times = naive_split(vehicles, single_order, reference)
+    pieces, naive_times, cut = naive_split(vehicles, single_order, reference)
     by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
     resolves = 0
 
@@ -393,10 +459,16 @@ def plan_fleet(
         return [int(kept[v]) for v in tour.order]
 
     budget = max(0.05, min(_RESOLVE_S, settings.time_limit_s / (4 * len(vehicles))))
-    routes = [
-        _Route(v, resolve(k, pieces[k], budget) if pieces[k] else [])
-        for k, v in enumerate(vehicles)
-    ]
+    routes = []
+    for k, vehicle in enumerate(vehicles):
+        route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [])
+        # A vehicle of the reference's own layer may fly its piece as cut, if that is quicker
+        # (the solvers shorten the length, not the time with its stops).
+        if vehicle.instance.points_xy is reference.points_xy and cut[k]:
+            as_cut = _Route(vehicle, cut[k])
+            if as_cut.time_s < route.time_s:
+                route = as_cut
+        routes.append(route)
     start_times = tuple(r.time_s for r in routes)
     moves = 0
     while time.perf_counter() < deadline:
@@ -451,46 +523,114 @@ def _own_targets(routes: list[_Route], k: int) -> list[int]:
     return [int(t) for t in np.flatnonzero(_owners(routes) == k)]
 
 
+# Stops of another vehicle nearest a stop of the last to land, tried for a swap with it.
+_SWAP_NEAREST = 6
+
+
+def _lost(route: _Route, stop: int, rest: list[int], elsewhere: npt.NDArray[np.bool_]) -> list[int]:
+    """The targets ``stop`` sees that neither ``rest`` nor ``elsewhere`` does."""
+    covers = route.vehicle.instance.covers
+    left = covers.seen(rest) | elsewhere
+    return [int(t) for t in covers.target[covers.ptr[stop] : covers.ptr[stop + 1]] if not left[t]]
+
+
+def _taking(route: _Route, order: list[int], targets: list[int], near: list[IntArray]) -> list[int]:
+    """``order`` with a viewpoint inserted, at least added distance, for each target it does
+    not see yet."""
+    covers = route.vehicle.instance.covers
+    have = covers.seen(order)
+    for t in targets:
+        if not have[t]:
+            order = _insert(route, order, near[t])
+            have = covers.seen(order)
+    return order
+
+
+def _seen_except(routes: list[_Route], skip: set[int]) -> npt.NDArray[np.bool_]:
+    out = np.zeros(routes[0].vehicle.instance.n_targets, dtype=bool)
+    for k, r in enumerate(routes):
+        if k not in skip:
+            out |= r.seen()
+    return out
+
+
 def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline: float) -> int:
-    """Move stops off the vehicle that lands last while that shortens it without making any
-    other flight as long; the number of moves made."""
+    """Move a stop off the vehicle that lands last, or swap one of its stops with a nearby
+    stop of another vehicle, while that shortens it without making the other's flight as
+    long; the number of moves made. A vehicle keeps at least one stop."""
     moves = 0
     while time.perf_counter() < deadline:
         c = int(np.argmax([r.time_s for r in routes]))
-        worst = routes[c].time_s
-        if len(routes[c].order) <= 1:
-            return moves
-        seen_elsewhere = np.zeros(routes[c].vehicle.instance.n_targets, dtype=bool)
-        for k, r in enumerate(routes):
-            if k != c:
-                seen_elsewhere |= r.seen()
+        worst, critical = routes[c].time_s, routes[c]
         best: tuple[float, int, list[int], list[int]] | None = None
-        covers = routes[c].vehicle.instance.covers
-        for i, stop in enumerate(routes[c].order):
-            rest = routes[c].order[:i] + routes[c].order[i + 1 :]
-            left = covers.seen(rest) | seen_elsewhere
-            orphans = [int(t) for t in covers.target[covers.ptr[stop] : covers.ptr[stop + 1]]]
-            orphans = [t for t in orphans if not left[t]]
-            rest_s = routes[c].vehicle.time_s(routes[c].points[rest])
-            if rest_s >= worst - _EPS_S:
+        for i, stop in enumerate(critical.order):
+            rest = critical.order[:i] + critical.order[i + 1 :]
+            rest_s = critical.vehicle.time_s(critical.points[rest]) if rest else 0.0
+            if not rest or rest_s >= worst - _EPS_S:
                 continue
+            lost = _lost(critical, stop, rest, _seen_except(routes, {c}))
             for j, other in enumerate(routes):
                 if j == c:
                     continue
-                order = list(other.order)
-                have = other.seen()
-                for t in orphans:
-                    if not have[t]:
-                        order = _insert(other, order, by_target[j][t])
-                        have = other.vehicle.instance.covers.seen(order)
-                other_s = other.vehicle.time_s(other.points[order])
-                value = max(rest_s, other_s)
+                order = _taking(other, list(other.order), lost, by_target[j])
+                value = max(rest_s, other.vehicle.time_s(other.points[order]))
                 if value < worst - _EPS_S and (best is None or value < best[0]):
                     best = (value, j, rest, order)
         if best is None:
+            best = _best_swap(routes, c, by_target, deadline)
+        if best is None:
             return moves
-        _, j, rest, order = best
-        routes[c].order, routes[c].time_s = rest, routes[c].vehicle.time_s(routes[c].points[rest])
-        routes[j].order, routes[j].time_s = order, routes[j].vehicle.time_s(routes[j].points[order])
+        _, j, mine, theirs = best
+        for k, order in ((c, mine), (j, theirs)):
+            routes[k].order = order
+            routes[k].time_s = routes[k].vehicle.time_s(routes[k].points[order])
         moves += 1
     return moves
+
+
+def _best_swap(
+    routes: list[_Route], c: int, by_target: list[list[IntArray]], deadline: float
+) -> tuple[float, int, list[int], list[int]] | None:
+    """The best swap of a stop of vehicle ``c`` with one of the nearest stops of another
+    vehicle that shortens ``c`` without making the other as long, or None."""
+    critical = routes[c]
+    worst = critical.time_s
+    best: tuple[float, int, list[int], list[int]] | None = None
+    for j, other in enumerate(routes):
+        if j == c or not other.order:
+            continue
+        elsewhere = _seen_except(routes, {c, j})
+        theirs_xy = other.points[other.order]
+        for i, stop in enumerate(critical.order):
+            if time.perf_counter() >= deadline:
+                return best
+            mine_rest = critical.order[:i] + critical.order[i + 1 :]
+            d = np.hypot(*(theirs_xy - critical.points[stop]).T)
+            for u_pos in np.argsort(d)[:_SWAP_NEAREST].tolist():
+                u = other.order[u_pos]
+                their_rest = other.order[:u_pos] + other.order[u_pos + 1 :]
+                lost_mine = _lost(
+                    critical,
+                    stop,
+                    mine_rest,
+                    elsewhere | other.vehicle.instance.covers.seen(their_rest),
+                )
+                lost_theirs = _lost(
+                    other,
+                    u,
+                    their_rest,
+                    elsewhere | critical.vehicle.instance.covers.seen(mine_rest),
+                )
+                mine = _taking(critical, mine_rest, lost_theirs, by_target[c])
+                if not mine:
+                    continue
+                mine_s = critical.vehicle.time_s(critical.points[mine])
+                if mine_s >= worst - _EPS_S:
+                    continue
+                theirs = _taking(other, their_rest, lost_mine, by_target[j])
+                if not theirs:
+                    continue
+                value = max(mine_s, other.vehicle.time_s(other.points[theirs]))
+                if value < worst - _EPS_S and (best is None or value < best[0]):
+                    best = (value, j, mine, theirs)
+    return best
