@@ -375,10 +375,12 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
             cuts.append(lo)
         return cuts if cuts[-1] == n else None
 
-    # At the longest single flight of the whole tour every vehicle's piece fits.
-    low, high = 0.0, max(v.time_s(stops_xy) for v in vehicles)
-    found = greedy(high)
-    if found is None or not math.isfinite(high):
+    # At the longest flight of the whole tour every piece fits, unless a vehicle cannot fly
+    # some stop within its endurance at all: then the cut must keep it off those stops.
+    whole = [t for t in (v.time_s(stops_xy) for v in vehicles) if math.isfinite(t)]
+    low, high = 0.0, max(whole, default=math.inf)
+    found = greedy(high) if whole else None
+    if found is None:
         raise SettingsError(
             "no split of the targets among the vehicles fits every vehicle's endurance: "
             "raise the endurance in --fleet or --endurance, or add vehicles"
