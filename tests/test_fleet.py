@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -240,6 +241,10 @@ def test_demo_fleet_sees_every_target_from_distinct_layers(tmp_path: Path, count
     colours = {r["vehicle"]: r["colour"] for r in routes}
     assert len(set(colours.values())) == count
     assert ((tmp_path / "out" / "map.png").exists()) == (count == 2)
+    kml = ET.parse(tmp_path / "out" / "plan.kml").getroot()
+    q = "{http://www.opengis.net/kml/2.2}"
+    folders = {f.findtext(f"{q}name") for f in kml.iter(f"{q}Folder")}
+    assert {f"Vehicle {k}" for k in range(1, count + 1)} <= folders
 
 
 def test_time_separation_from_homes_of_their_own(tmp_path: Path) -> None:

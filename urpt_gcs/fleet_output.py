@@ -122,12 +122,13 @@ def fleet_summary_text(data: dict[str, Any]) -> str:
     f = data["fleet"]
     sep = f["separation"]
     gap = "no bound" if f["makespan_gap_pct"] is None else f"gap {f['makespan_gap_pct']:.1f} %"
+    count = len(f["vehicles"])
     lines = [
-        f"fleet          {len(f['vehicles'])} vehicles, {data['targets']} targets",
+        f"fleet          {count} vehicle{'s' if count != 1 else ''}, {data['targets']} targets",
         f"makespan       {_minutes(f['makespan_s'])} (last landing); lower bound "
         f"{_minutes(f['makespan_bound_s'])}, {gap}",
         f"naive split    {_minutes(f['naive_split_makespan_s'])} (the single-vehicle tour "
-        f"cut into {len(f['vehicles'])} pieces); one vehicle alone "
+        f"cut into {count} piece{'s' if count != 1 else ''}); one vehicle alone "
         f"{_minutes(f['single_vehicle']['flight_time_s'])}",
         "vehicle  layer (m)  above home  start  flight        length     sorties  targets",
     ]
