@@ -1,7 +1,7 @@
 """Benchmark: fleet makespan for K = 1..4 vehicles against the naive split, with the bound.
 
-    .venv/bin/python benchmarks/fleet_makespan.py [--targets 100] [--time-limit 10]
-        [--raster pysheds_dem_wgs84.tif] [--box 2000] [--seed 3]
+    .venv/bin/python benchmarks/fleet_makespan.py [--targets 100] [--time-limit 20]
+        [--raster odm_dsm_utm51n.tif] [--box M] [--seed 3] [--max-vehicles 4]
 
 Targets are placed on valid ground of a real raster beside the checkout (``../shared/dem``,
 as the tests place them). Every vehicle flies the same layer from the same home, so the
@@ -40,9 +40,11 @@ def _minutes(seconds: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=100)
-    parser.add_argument("--time-limit", type=float, default=10.0)
-    parser.add_argument("--raster", default="pysheds_dem_wgs84.tif")
-    parser.add_argument("--box", type=float, default=2000.0)
+    parser.add_argument("--time-limit", type=float, default=20.0)
+    parser.add_argument("--raster", default="odm_dsm_utm51n.tif")
+    parser.add_argument(
+        "--box", type=float, default=None, help="keep the targets to a box this wide, metres"
+    )
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--max-vehicles", type=int, default=4)
     args = parser.parse_args()
@@ -68,7 +70,9 @@ def main() -> None:
     assert reference.points_xy is not None
     single_time = vehicle.time_s(reference.points_xy[list(single.order)])
     print(
-        f"{args.raster}, {len(targets)} targets in a {args.box:g} m box, "
+        f"{args.raster}, {len(targets)} targets"
+        + ("" if args.box is None else f" in a {args.box:g} m box")
+        + ", "
         f"{reference.n_viewpoints} viewpoints, endurance {settings.endurance_min:g} min, "
         f"{settings.mission.cruise_speed_m_s:g} m/s, {settings.mission.hold_s:g} s hold"
     )

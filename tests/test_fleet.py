@@ -116,6 +116,26 @@ def test_bound_and_planned_makespan_bracket_the_brute_force_optimum(
     assert tours.makespan_s <= max(tours.start_times_s) + 1e-9
 
 
+@pytest.mark.parametrize(
+    "model",
+    [
+        FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0),
+        FlightModel.arducopter(cruise_m_s=12.0, hold_s=0.0, accel_m_s2=1.0),
+        FlightModel.px4(cruise_m_s=8.0, hold_s=2.0),
+    ],
+)
+def test_leg_times_grow_and_are_subadditive(model: FlightModel) -> None:
+    """The reach bound needs it: a chain of legs is never quicker than one leg of their sum."""
+    d = np.concatenate([np.linspace(0.0, 6.0, 301), np.linspace(6.0, 400.0, 400)])
+    a, b = np.meshgrid(d, d)
+    for leg in (model.leg_s, model.return_s):
+        assert (np.diff(leg(d)) >= 0.0).all()
+        assert (leg(a) + leg(b) >= leg(a + b) - 1e-9).all()
+    fastest = np.minimum(model.leg_s(d), model.return_s(d))
+    faster = model.return_s if model.return_m_s >= model.cruise_m_s else model.leg_s
+    assert np.allclose(fastest, faster(d))
+
+
 def test_restrict_keeps_exactly_the_viewpoints_and_pairs_of_the_share() -> None:
     _, reference = _tiny_fleet(7, 1)
     dense = reference.covers.dense()

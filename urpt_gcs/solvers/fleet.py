@@ -233,10 +233,11 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
     ``t``, which lies within the cone radius of ``t`` (the instance geometry's
     ``cone_radius_m``, the widest the camera reaches). So that vehicle flies a sortie out to a
     point at least ``d_k(t) = max(|home_k - t| - r_k(t), 0)`` from its home, stops there and
-    comes back: by :meth:`Vehicle.out_and_back_s` (a rest-to-rest leg's time is increasing
-    and concave in its length with time 0 at length 0, so it is subadditive and a chain of
-    legs of total length at least ``d`` takes at least the time of one leg of length ``d``;
-    the faster of the two speeds bounds either). The makespan is at least
+    comes back: by :meth:`Vehicle.out_and_back_s`. A rest-to-rest leg's least time grows
+    with its length and is subadditive (two legs flown one after the other, stopping between,
+    are one way of flying their sum from rest to rest), so a chain of legs of total length at
+    least ``d`` takes at least one leg of length ``d``; the profile with the faster of the two
+    speeds is never slower than the other. The makespan is at least
     ``max_t min_k out_and_back_k(d_k(t))``.
 
     ``share_s``: the total length ``L`` of all the vehicles' flights, with ``J`` the sum of
