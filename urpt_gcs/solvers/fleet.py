@@ -37,6 +37,10 @@ IntArray = npt.NDArray[np.int64]
 _EPS_S = 1e-6
 # Share of the time limit the single-vehicle tour may take; the rest goes to the fleet search.
 SINGLE_SHARE = 0.4
+# Where else the single tour is cut open for the search's start (shares of its stops), and
+# the share of the search's time that may go to it.
+_ROTATIONS = (1 / 6, 2 / 6, 3 / 6, 4 / 6, 5 / 6)
+_ROTATION_SHARE = 0.25
 # Budget of one vehicle's GTSP re-solve within the search, seconds.
 _RESOLVE_S = 0.3
 
@@ -444,6 +448,23 @@ def plan_fleet(
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
     pieces, naive_times, cut = naive_split(vehicles, single_order, reference)
+    # The tour is a cycle: cut from a few other starting stops too, and start from the best.
+    order = list(single_order)
+    start_s = max(naive_times)
+    for r in _ROTATIONS:
+        if len(vehicles) == 1 or time.perf_counter() - started > _ROTATION_SHARE * (
+            settings.time_limit_s
+        ):
+            break
+        shift = int(r * len(order))
+        if shift == 0:
+            continue
+        try:
+            tried = naive_split(vehicles, order[shift:] + order[:shift], reference)
+        except SettingsError:
+            continue  # no cut from there fits every endurance
+        if max(tried[1]) < start_s - _EPS_S:
+            start_s, pieces, cut = max(tried[1]), tried[0], tried[2]
     by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
     resolves = 0
 
