@@ -29,7 +29,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from urpt_gcs.errors import SettingsError
+from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.gtsp import Instance, build_instance
 from urpt_gcs.planner import (
     Plan,
@@ -405,7 +405,7 @@ def plan_fleet_mission(
         timings_s=stages.timings_s,
     )
     if result.makespan_s < bound.bound_s * (1.0 - 1e-9):
-        raise SettingsError(
+        raise PlanError(
             f"internal check failed: makespan {result.makespan_s:.1f} s is under its lower "
             f"bound {bound.bound_s:.1f} s; report this"
         )

@@ -199,7 +199,7 @@ def with_home(instance: Instance, home_xy: tuple[float, float]) -> Instance:
 
 
 # Above this many targets the spanning-tree bound (a dense matrix) is left out.
-TREE_BOUND_MAX_TARGETS = 3000
+TREE_BOUND_MAX_TARGETS = 2000
 
 
 def tree_bound_m(
