@@ -326,3 +326,26 @@ def test_real_raster_fleet(tmp_path: Path) -> None:
     )
     data = _fleet_run(tmp_path, dem, csv, "--vehicles", "2", "--no-map")
     _check_fleet_folder(tmp_path / "out", dem, targets, data, 10.0)
+
+
+def test_track_follows_the_plan_through_every_stop_in_the_planned_time() -> None:
+    """Sorties back to back: the track's length in time is the plan's flight time (summed by
+    the sortie splitter), it passes over every stop at the plane and starts and ends on the
+    ground at home."""
+    from urpt_gcs.fleet import track
+    from urpt_gcs.planner import PlanSettings, plan
+
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=0.5), endurance_min=4.0)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    assert len(result.sorties) > 1
+    tr = track(result)
+    assert tr.t_s[-1] == pytest.approx(result.flight_time_s, abs=1e-6)
+    ground = result.mission.home.amsl_m
+    eye = ground + result.altitude_rel_m
+    assert tr.xyz[0].tolist() == pytest.approx([*result.home_xy, ground])
+    assert tr.xyz[-1].tolist() == pytest.approx([*result.home_xy, ground])
+    assert result.tour.points_xy is not None
+    for x, y in result.tour.points_xy.tolist():
+        at = np.flatnonzero(np.hypot(tr.xyz[:, 0] - x, tr.xyz[:, 1] - y) < 1e-9)
+        assert at.size >= 2 and np.allclose(tr.xyz[at, 2], eye)
+    assert not tr.airborne[0] and not tr.airborne[-1]
