@@ -673,51 +673,43 @@ def _pair_closest(tracks: Sequence[Track], i: int, j: int) -> Closest | None:
 def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separation:
     """Start delays that keep every pair apart, and the closest approach they leave.
 
-    Vehicles are taken in turn; each starts at the first step of :data:`DELAY_STEP_S` at
-    which its track stays ``min_m`` from every earlier vehicle's while both fly (3-D in
-    altitude mode, less the written altitudes' rounding; horizontal in time mode). None up to
-    :data:`MAX_DELAY_SHARE` of the longest flight: refused, naming the pair, where and when.
+    Vehicles are taken in turn (:func:`_delays`, for a few orders of take-off); each starts
+    at the first step of :data:`DELAY_STEP_S` at which its track stays ``min_m`` from every
+    earlier one's while both fly (3-D in altitude mode, less the written altitudes'
+    rounding; horizontal in time mode). None up to :data:`MAX_DELAY_SHARE` of the longest
+    flight in any order: refused, naming the pair, where and when.
     """
     base = [track(p) for p in plans]
     horizontal = fleet.separation == "time"
     need = fleet.min_m - (0.0 if horizontal else _WRITTEN_ROUNDING_M)
     # A vehicle held back longer than half the longest flight is all but flying in turn.
     cap = MAX_DELAY_SHARE * max(p.flight_time_s for p in plans)
-    delays = [0.0]
-
-    def apart(k: int, delay: float) -> Closest | None:
-        moved = base[k].shifted(delay)
-        worst: Closest | None = None
-        for j in range(k):
-            c = _pair_closest([base[j].shifted(delays[j]), moved], 0, 1)
-            if c is None:
-                continue
-            c = dataclasses.replace(c, vehicles=(j + 1, k + 1))
-            value = c.horizontal_m if horizontal else c.distance_m
-            if value < need and (worst is None or value < _value(worst, horizontal)):
-                worst = c
-        return worst
-
-    for k in range(1, len(plans)):
-        first = apart(k, 0.0)
-        delay = 0.0
-        clash = first
-        while clash is not None:
-            delay += DELAY_STEP_S
-            if delay > cap:
-                assert first is not None
-                lat, lon = _latlon(site.crs, np.array([first.where_xy]))[0]
-                what = "horizontally" if horizontal else ""
-                raise SettingsError(
-                    f"vehicles {first.vehicles[0]} and {first.vehicles[1]} come within "
-                    f"{_value(first, horizontal):.1f} m {what} of each other at "
-                    f"{first.at_s:.0f} s after take-off near {lat:.6f}, {lon:.6f}, under the "
-                    f"{fleet.min_m:g} m required, and no start delay up to {cap:.0f} s avoids "
-                    "it: give the vehicles homes further apart in --fleet, or use "
-                    "--separation altitude"
-                )
-            clash = apart(k, delay)
-        delays.append(delay)
+    # Who takes off first changes the delays: the vehicles in turn as numbered (lowest layer
+    # first), the longest flight first, and the highest layer first; the earliest last
+    # landing is kept, the first refusal raised if every order is refused.
+    count = len(plans)
+    turns = [
+        list(range(count)),
+        sorted(range(count), key=lambda k: -plans[k].flight_time_s),
+        list(range(count - 1, -1, -1)),
+    ]
+    best: list[float] | None = None
+    refused: SettingsError | None = None
+    for turn in turns:
+        try:
+            delays = _delays(base, turn, need, cap, horizontal, fleet, site)
+        except SettingsError as exc:
+            refused = refused or exc
+            continue
+        finish = max(d + p.flight_time_s for d, p in zip(delays, plans, strict=True))
+        if best is None or finish < max(
+            d + p.flight_time_s for d, p in zip(best, plans, strict=True)
+        ):
+            best = delays
+    if best is None:
+        assert refused is not None
+        raise refused
+    delays = best
     tracks = [b.shifted(d) for b, d in zip(base, delays, strict=True)]
     found = [
         c
@@ -737,6 +729,55 @@ def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separ
         closest_latlon=where,
         closest_horizontal_m=flat,
     )
+
+
+def _delays(
+    base: list[Track],
+    turn: list[int],
+    need: float,
+    cap: float,
+    horizontal: bool,
+    fleet: FleetSettings,
+    site: _Site,
+) -> list[float]:
+    """Start delays with the vehicles taking off in the order ``turn``: each at the first
+    step of :data:`DELAY_STEP_S` that keeps it ``need`` from every vehicle before it."""
+    delays = [0.0] * len(base)
+
+    def apart(k: int, delay: float, earlier: list[int]) -> Closest | None:
+        moved = base[k].shifted(delay)
+        worst: Closest | None = None
+        for j in earlier:
+            c = _pair_closest([base[j].shifted(delays[j]), moved], 0, 1)
+            if c is None:
+                continue
+            c = dataclasses.replace(c, vehicles=(min(j, k) + 1, max(j, k) + 1))
+            value = c.horizontal_m if horizontal else c.distance_m
+            if value < need and (worst is None or value < _value(worst, horizontal)):
+                worst = c
+        return worst
+
+    for n, k in enumerate(turn[1:], start=1):
+        first = apart(k, 0.0, turn[:n])
+        delay = 0.0
+        clash = first
+        while clash is not None:
+            delay += DELAY_STEP_S
+            if delay > cap:
+                assert first is not None
+                lat, lon = _latlon(site.crs, np.array([first.where_xy]))[0]
+                what = " horizontally" if horizontal else ""
+                raise SettingsError(
+                    f"vehicles {first.vehicles[0]} and {first.vehicles[1]} come within "
+                    f"{_value(first, horizontal):.1f} m{what} of each other at "
+                    f"{first.at_s:.0f} s after take-off near {lat:.6f}, {lon:.6f}, under the "
+                    f"{fleet.min_m:g} m required, and no start delay up to {cap:.0f} s avoids "
+                    "it: give the vehicles homes further apart in --fleet, or use "
+                    "--separation altitude"
+                )
+            clash = apart(k, delay, turn[:n])
+        delays[k] = delay
+    return delays
 
 
 def _value(c: Closest, horizontal: bool) -> float:

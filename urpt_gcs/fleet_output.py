@@ -155,8 +155,8 @@ def fleet_summary_text(data: dict[str, Any]) -> str:
     if delayed:
         lines.append(
             "start delays   "
-            + ", ".join(f"vehicle {k} starts {d:g} s after vehicle 1" for k, d in delayed)
-            + " (to keep the separation)"
+            + ", ".join(f"vehicle {k} {d:g} s" for k, d in delayed)
+            + " after the first take-off (to keep the separation)"
         )
     lines += [f"warning        {w}" for w in data["warnings"]]
     if data["files"]:
