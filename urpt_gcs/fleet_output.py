@@ -73,6 +73,7 @@ def fleet_summary(fleet: FleetPlan, files: list[str]) -> dict[str, Any]:
             "bound": {
                 "reach_s": round(bound.reach_s, 1),
                 "share_s": round(bound.share_s, 1),
+                "pigeonhole_s": round(bound.pigeonhole_s, 1),
             },
             # The naive split: the single-vehicle tour cut into K contiguous pieces, each
             # piece's tour solved again on its own vehicle's layer (the search's start); and

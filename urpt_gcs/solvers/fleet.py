@@ -17,9 +17,10 @@ Nothing here sees a raster: only instances, points, distances and the flight mod
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,14 +121,15 @@ class FleetTours:
 
 @dataclass(frozen=True, slots=True)
 class MakespanBound:
-    """A lower bound on the makespan of any fleet plan, and its two parts."""
+    """A lower bound on the makespan of any fleet plan, and its parts."""
 
     reach_s: float
     share_s: float
+    pigeonhole_s: float = 0.0
 
     @property
     def bound_s(self) -> float:
-        return max(self.reach_s, self.share_s)
+        return max(self.reach_s, self.share_s, self.pigeonhole_s)
 
 
 def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntArray]:
@@ -260,13 +262,15 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
     endurance ``E`` a sortie holds at most ``E - ends`` of it, so that vehicle's flight is at
     least ``max(ends + W / K, W / K * E / (E - ends))`` (the least of these over the vehicles'
     models).
+
+    ``pigeonhole_s``: see :func:`_pigeonhole_s`.
     """
     from urpt_gcs.solvers.base import greedy_disjoint
 
     if not vehicles:
         raise ValueError("makespan_bound needs at least one vehicle")
     geometry = [v.instance.geometry for v in vehicles]
-    reach = 0.0
+    reach = pigeonhole = 0.0
     radius = None
     if all(g is not None for g in geometry):
         per_vehicle = []
@@ -275,8 +279,10 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
             hx, hy = vehicle.home_xy
             d = np.hypot(g.targets_xy[:, 0] - hx, g.targets_xy[:, 1] - hy)
             per_vehicle.append(vehicle.out_and_back_s(np.maximum(d - g.cone_radius_m, 0.0)))
-        reach = float(np.min(np.vstack(per_vehicle), axis=0).max())
+        least = np.min(np.vstack(per_vehicle), axis=0)
+        reach = float(least.max())
         radius = np.max(np.vstack([g.cone_radius_m for g in geometry if g is not None]), axis=0)
+        pigeonhole = _pigeonhole_s(vehicles, radius, least)
     h1 = np.asarray(vehicles[0].home_xy)
     joins = math.fsum(float(np.hypot(*(np.asarray(v.home_xy) - h1))) for v in vehicles)
     length = 0.0
@@ -301,7 +307,64 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
             for e, end in zip((v.endurance_s for v in vehicles), ends, strict=True)
         )
         share = max(min(ends) + each, factor * each)
-    return MakespanBound(reach_s=reach, share_s=share)
+    return MakespanBound(reach_s=reach, share_s=share, pigeonhole_s=pigeonhole)
+
+
+# Targets tried for the pigeonhole bound beyond the K + 1 it needs; all subsets up to this K.
+_PIGEON_SPARE = 3
+_PIGEON_SUBSETS_MAX_K = 6
+
+
+def _pigeonhole_s(vehicles: Sequence[Vehicle], radius_m: FloatArray, reach_s: FloatArray) -> float:
+    """Among K + 1 targets no point sees two of (their widest cones disjoint), some vehicle
+    sees two, from two stops, in one sortie or two; either takes at least a take-off, the
+    way out to one region, across to the other, back home and a landing, with two stops
+    (two sorties take longer still: the way across is no longer than the two ways home).
+    The least such flight over the pairs of the set and the vehicles bounds the makespan;
+    the set is chosen among the targets farthest to reach."""
+    k_count = len(vehicles)
+    g = vehicles[0].instance.geometry
+    assert g is not None
+    m = len(g.targets_xy)
+    if m < k_count + 1:
+        return 0.0
+    pick = np.argsort(-reach_s, kind="stable")[: k_count + 1 + _PIGEON_SPARE]
+    xy, r = g.targets_xy[pick], radius_m[pick]
+    across = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    disjoint = across > r[:, None] + r[None, :]
+    gap = np.maximum(across - r[:, None] - r[None, :], 0.0)
+    pair = np.full(across.shape, math.inf)
+    for vehicle in vehicles:
+        vg = vehicle.instance.geometry
+        assert vg is not None
+        hx, hy = vehicle.home_xy
+        out = np.maximum(np.hypot(xy[:, 0] - hx, xy[:, 1] - hy) - vg.cone_radius_m[pick], 0.0)
+        model = vehicle.model
+
+        def fastest(d: FloatArray, model: FlightModel = model) -> FloatArray:
+            f: FloatArray = np.minimum(model.leg_s(d), model.return_s(d))
+            return f
+
+        ends = model.takeoff_s(vehicle.altitude_rel_m) + model.landing_s(vehicle.altitude_rel_m)
+        legs = fastest(out)
+        flight = ends + 2.0 * model.stop_s + legs[:, None] + fastest(gap) + legs[None, :]
+        pair = np.minimum(pair, flight)
+    candidates = range(len(pick))
+    subsets: Iterable[tuple[int, ...]] = (
+        itertools.combinations(candidates, k_count + 1)
+        if k_count <= _PIGEON_SUBSETS_MAX_K
+        else [tuple(candidates)[: k_count + 1]]
+    )
+    best = 0.0
+    for subset in subsets:
+        idx = np.asarray(subset)
+        block = disjoint[np.ix_(idx, idx)]
+        np.fill_diagonal(block, True)
+        if not block.all():
+            continue
+        values = pair[np.ix_(idx, idx)][np.triu_indices(len(idx), 1)]
+        best = max(best, float(values.min()))
+    return best
 
 
 def _seconds_per_metre(model: FlightModel) -> float:
