@@ -47,7 +47,7 @@ from urpt_gcs.planner import (
     flight_model,
 )
 from urpt_gcs.solvers import choose, prepare, solve
-from urpt_gcs.solvers.base import SolveSettings, finish_tour, geometric_lower_bound
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.fleet import (
     SINGLE_SHARE,
     FleetTours,
@@ -282,15 +282,23 @@ class _Layer:
 
 @dataclass(frozen=True, slots=True)
 class FleetProblem:
-    """What the fleet's solver works on: every vehicle's layer and instance, and the
-    reference instance (the highest layer's viewpoints, from the first vehicle's home) the
-    single-vehicle tour is solved on."""
+    """What the fleet's solver works on: every vehicle's layer and instance, the reference
+    instance the single-vehicle tour is solved on (the lowest layer's viewpoints, from the
+    first vehicle's home: what a lower eye sees, the eye above it sees too, so its stops
+    serve every layer) and the widest (the highest layer's), whose bound holds for all."""
 
     site: _Site
     layers: tuple[_Layer, ...]
     vehicles: tuple[Vehicle, ...]
     reference: Instance
+    widest: Instance
     gsd_cm: float | None
+
+    @property
+    def single_bound_m(self) -> float | None:
+        """A bound on any single closed tour from the first home that sees every target from
+        any layer flown, or None when the layers' regions are not nested."""
+        return geometric_lower_bound(self.widest) if self.monotone else None
 
     @property
     def monotone(self) -> bool:
@@ -323,6 +331,7 @@ def fleet_problem(
         )
     layers = _layers(site, settings, fleet, stages)
     top = max(range(len(layers)), key=lambda k: layers[k].area.camera.altitude_m)
+    low = min(range(len(layers)), key=lambda k: layers[k].area.camera.altitude_m)
     vehicles = tuple(
         Vehicle(
             layer.instance,
@@ -332,8 +341,10 @@ def fleet_problem(
         )
         for layer in layers
     )
-    reference = with_home(layers[top].instance, vehicles[0].home_xy)
-    return FleetProblem(site, tuple(layers), vehicles, reference, settings.gsd_cm)
+    home = vehicles[0].home_xy
+    reference = with_home(layers[low].instance, home)
+    widest = with_home(layers[top].instance, home)
+    return FleetProblem(site, tuple(layers), vehicles, reference, widest, settings.gsd_cm)
 
 
 def plan_fleet_mission(
@@ -386,7 +397,7 @@ def plan_fleet_mission(
             f"vehicle {idle[0]} has nothing left to photograph (the others' stops see all its "
             "targets): use fewer vehicles (--vehicles or --fleet)"
         )
-    bound = makespan_bound(vehicles, single.lower_bound if problem.monotone else None)
+    bound = makespan_bound(vehicles, problem.single_bound_m)
     plans = tuple(_vehicle_plan(k, layer, tours, solver, stages) for k, layer in enumerate(layers))
     stages.say("checking separation along the planned tracks")
     separation = _separate(plans, fleet, problem.site)
@@ -551,6 +562,7 @@ def _vehicle_plan(k: int, layer: _Layer, tours: FleetTours, solver: str, stages:
     tour = finish_tour(
         sub, order, geometric_lower_bound(sub), solver, tours.search_s, notes=("fleet share",)
     )
+    tour = _counted_once(tour, layer.site.targets_xy[np.asarray(targets, dtype=np.int64)])
     idx = np.asarray(targets, dtype=np.int64)
     site = layer.site
     shared = TargetSet(
@@ -566,6 +578,22 @@ def _vehicle_plan(k: int, layer: _Layer, tours: FleetTours, solver: str, stages:
     regions = tuple(dataclasses.replace(layer.regions[i], target=j) for j, i in enumerate(targets))
     stages.say(f"checking vehicle {k + 1}'s missions")
     return finish_plan(sub_site, sub_area, regions, sub, tour, layer.settings, _Stages(None))
+
+
+def _counted_once(tour: Tour, targets_xy: FloatArray) -> Tour:
+    """The tour with each target counted for one stop only, the nearest that sees it: only
+    a counted target must be seen with the position margin and as written, and the mission
+    still flies every stop."""
+    assert tour.points_xy is not None
+    d = np.hypot(
+        tour.points_xy[:, None, 0] - targets_xy[None, :, 0],
+        tour.points_xy[:, None, 1] - targets_xy[None, :, 1],
+    )
+    d = np.where(tour.sees, d, np.inf)
+    nearest = np.argmin(d, axis=0)
+    sees = np.zeros_like(tour.sees)
+    sees[nearest, np.arange(len(targets_xy))] = True
+    return dataclasses.replace(tour, sees=sees)
 
 
 # ---- tracks and separation -------------------------------------------------------------

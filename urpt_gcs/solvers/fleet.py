@@ -549,10 +549,10 @@ def plan_fleet(
     routes = []
     for k, vehicle in enumerate(vehicles):
         route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [])
-        # A vehicle of the reference's own layer may fly its piece as cut, if that is quicker
-        # (the solvers shorten the length, not the time with its stops).
-        if vehicle.instance.points_xy is reference.points_xy and cut[k]:
-            as_cut = _Route(vehicle, cut[k])
+        # The piece as cut, on the vehicle's own viewpoints, if that is quicker: the solvers
+        # shorten the length, not the time with its stops, and have little time here.
+        if cut[k]:
+            as_cut = _Route(vehicle, _carried(vehicle, cut[k], reference, by_target[k]))
             if as_cut.time_s < route.time_s:
                 route = as_cut
         routes.append(route)
@@ -588,6 +588,32 @@ def plan_fleet(
         resolves=resolves,
         search_s=time.perf_counter() - started,
     )
+
+
+def _carried(
+    vehicle: Vehicle, stops: list[int], reference: Instance, near: list[IntArray]
+) -> list[int]:
+    """Stops of ``reference`` in flight order carried onto the vehicle's own viewpoints:
+    for each target a stop sees that the route does not yet, the vehicle's viewpoint of that
+    target nearest the stop (the stops themselves where the instances are the same)."""
+    if vehicle.instance.points_xy is reference.points_xy:
+        return list(stops)
+    inst = vehicle.instance
+    assert inst.points_xy is not None and reference.points_xy is not None
+    covers = reference.covers
+    order: list[int] = []
+    have = np.zeros(inst.n_targets, dtype=bool)
+    for stop in stops:
+        at = reference.points_xy[stop]
+        for t in covers.target[covers.ptr[stop] : covers.ptr[stop + 1]].tolist():
+            if have[t]:
+                continue
+            options = near[t]
+            d = np.hypot(*(inst.points_xy[options] - at).T)
+            v = int(options[int(np.argmin(d))])
+            order.append(v)
+            have |= inst.covers.seen([v])
+    return order
 
 
 def _owners(routes: list[_Route]) -> IntArray:
