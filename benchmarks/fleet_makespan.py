@@ -82,7 +82,7 @@ def main() -> None:
     )
     print(
         f"{'K':>2s} {'naive (min)':>11s} {'ours (min)':>10s} {'vs naive':>8s} "
-        f"{'bound (min)':>11s} {'gap':>7s} {'reach/share bound (min)':>23s} "
+        f"{'bound (min)':>11s} {'gap':>7s} {'reach / share / pigeonhole (min)':>32s} "
         f"{'moves':>5s} {'search s':>8s}"
     )
     budget = args.time_limit - single_s
@@ -95,7 +95,8 @@ def main() -> None:
         print(
             f"{k:2d} {_minutes(naive):>11s} {_minutes(ours):>10s} "
             f"{100.0 * (ours - naive) / naive:+7.1f}% {_minutes(bound.bound_s):>11s} "
-            f"{100.0 * gap:6.1f}% {_minutes(bound.reach_s):>11s} / {_minutes(bound.share_s):>9s} "
+            f"{100.0 * gap:6.1f}% {_minutes(bound.reach_s):>12s} / {_minutes(bound.share_s)} / "
+            f"{_minutes(bound.pigeonhole_s)} "
             f"{tours.moves:5d} {tours.search_s:8.1f}"
         )
 
