@@ -558,23 +558,29 @@ def plan_fleet(
         routes.append(route)
     start_times = tuple(r.time_s for r in routes)
     moves = 0
+    long_round = False
     while time.perf_counter() < deadline:
-        moved = _move_stops(routes, by_target, deadline)
+        moved = 0 if long_round else _move_stops(routes, by_target, deadline)
         moves += moved
         improved = False
-        for k, route in enumerate(routes):
-            if time.perf_counter() >= deadline:
+        # The longest flights first. When neither moves nor short re-solves help, the time
+        # left goes to one round of longer re-solves, shared out over the vehicles.
+        turn = sorted(range(len(routes)), key=lambda k: -routes[k].time_s)
+        for n, k in enumerate(turn):
+            left = deadline - time.perf_counter()
+            if left <= 0.0:
                 break
             mine = _own_targets(routes, k)
             if not mine:
                 continue
-            order = resolve(k, mine, budget)
-            t = route.vehicle.time_s(route.points[order])
-            if t < route.time_s - _EPS_S:
-                route.order, route.time_s = order, t
+            order = resolve(k, mine, max(budget, left / (len(turn) - n)) if long_round else budget)
+            t = routes[k].vehicle.time_s(routes[k].points[order])
+            if t < routes[k].time_s - _EPS_S:
+                routes[k].order, routes[k].time_s = order, t
                 improved = True
-        if not (improved or moved):
+        if long_round and not improved:
             break
+        long_round = not (improved or moved)
     owners = _owners(routes)
     return FleetTours(
         orders=tuple(tuple(r.order) for r in routes),
