@@ -42,6 +42,9 @@ SINGLE_SHARE = 0.4
 # the share of the search's time that may go to it.
 _ROTATIONS = (1 / 6, 2 / 6, 3 / 6, 4 / 6, 5 / 6)
 _ROTATION_SHARE = 0.25
+# How many of the best cuts the search descends from, within this share of its time.
+_STARTS = 3
+_STARTS_SHARE = 0.6
 # Budget of one vehicle's GTSP re-solve within the search, seconds.
 _RESOLVE_S = 0.3
 
@@ -511,13 +514,12 @@ def plan_fleet(
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
     pieces, naive_times, cut = naive_split(vehicles, single_order, reference)
-    # The tour is a cycle: cut from a few other starting stops too, and start from the best.
+    # The tour is a cycle: it is cut open at a few other stops too; the search descends from
+    # the best few cuts in turn and goes on from the best it reaches.
     order = list(single_order)
-    start_s = max(naive_times)
-    for r in _ROTATIONS:
-        if len(vehicles) == 1 or time.perf_counter() - started > _ROTATION_SHARE * (
-            settings.time_limit_s
-        ):
+    cuts = [(max(naive_times), pieces, cut)]
+    for r in _ROTATIONS if len(vehicles) > 1 else ():
+        if time.perf_counter() - started > _ROTATION_SHARE * settings.time_limit_s:
             break
         shift = int(r * len(order))
         if shift == 0:
@@ -526,8 +528,8 @@ def plan_fleet(
             tried = naive_split(vehicles, order[shift:] + order[:shift], reference)
         except SettingsError:
             continue  # no cut from there fits every endurance
-        if max(tried[1]) < start_s - _EPS_S:
-            start_s, pieces, cut = max(tried[1]), tried[0], tried[2]
+        cuts.append((max(tried[1]), tried[0], tried[2]))
+    cuts.sort(key=lambda c: c[0])
     by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
     resolves = 0
 
@@ -546,41 +548,71 @@ def plan_fleet(
         return [int(kept[v]) for v in tour.order]
 
     budget = max(0.05, min(_RESOLVE_S, settings.time_limit_s / (4 * len(vehicles))))
-    routes = []
-    for k, vehicle in enumerate(vehicles):
-        route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [])
-        # The piece as cut, on the vehicle's own viewpoints, if that is quicker: the solvers
-        # shorten the length, not the time with its stops, and have little time here.
-        if cut[k]:
-            as_cut = _Route(vehicle, _carried(vehicle, cut[k], reference, by_target[k]))
-            if as_cut.time_s < route.time_s:
-                route = as_cut
-        routes.append(route)
-    start_times = tuple(r.time_s for r in routes)
-    moves = 0
-    long_round = False
-    while time.perf_counter() < deadline:
-        moved = 0 if long_round else _move_stops(routes, by_target, deadline)
-        moves += moved
-        improved = False
-        # The longest flights first. When neither moves nor short re-solves help, the time
-        # left goes to one round of longer re-solves, shared out over the vehicles.
-        turn = sorted(range(len(routes)), key=lambda k: -routes[k].time_s)
-        for n, k in enumerate(turn):
-            left = deadline - time.perf_counter()
-            if left <= 0.0:
+
+    def begin(pieces: list[list[int]], cut: list[list[int]]) -> list[_Route]:
+        routes = []
+        for k, vehicle in enumerate(vehicles):
+            route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [])
+            # The piece as cut, on the vehicle's own viewpoints, if that is quicker: the
+            # solvers shorten the length, not the time with its stops, and have little time.
+            if cut[k]:
+                as_cut = _Route(vehicle, _carried(vehicle, cut[k], reference, by_target[k]))
+                if as_cut.time_s < route.time_s:
+                    route = as_cut
+            routes.append(route)
+        return routes
+
+    def descend(routes: list[_Route], until: float, long_round: bool) -> tuple[int, bool]:
+        """Moves and re-solves, longest flight first, until neither helps (or ``until``);
+        a long round instead shares the time left out over one re-solve of each."""
+        moves, improved_any = 0, False
+        while time.perf_counter() < until:
+            moved = 0 if long_round else _move_stops(routes, by_target, until)
+            moves += moved
+            improved = False
+            turn = sorted(range(len(routes)), key=lambda k: -routes[k].time_s)
+            for n, k in enumerate(turn):
+                left = until - time.perf_counter()
+                if left <= 0.0:
+                    break
+                mine = _own_targets(routes, k)
+                if not mine:
+                    continue
+                spend = max(budget, left / (len(turn) - n)) if long_round else budget
+                found = resolve(k, mine, spend)
+                t = routes[k].vehicle.time_s(routes[k].points[found])
+                if t < routes[k].time_s - _EPS_S:
+                    routes[k].order, routes[k].time_s = found, t
+                    improved = True
+            improved_any |= improved or moved > 0
+            if long_round or not (improved or moved):
                 break
-            mine = _own_targets(routes, k)
-            if not mine:
-                continue
-            order = resolve(k, mine, max(budget, left / (len(turn) - n)) if long_round else budget)
-            t = routes[k].vehicle.time_s(routes[k].points[order])
-            if t < routes[k].time_s - _EPS_S:
-                routes[k].order, routes[k].time_s = order, t
-                improved = True
-        if long_round and not improved:
+        return moves, improved_any
+
+    starts = cuts[:_STARTS]
+    short_until = started + _STARTS_SHARE * settings.time_limit_s
+    routes: list[_Route] = []
+    start_times: tuple[float, ...] = ()
+    moves = 0
+    for n, (_, pieces_n, cut_n) in enumerate(starts):
+        now = time.perf_counter()
+        if n > 0 and now >= short_until:
             break
-        long_round = not (improved or moved)
+        trial = begin(pieces_n, cut_n)
+        if n == 0:
+            start_times = tuple(r.time_s for r in trial)
+        until = now + max(short_until - now, 0.0) / (len(starts) - n)
+        moved, _ = descend(trial, max(until, now + budget), long_round=False)
+        moves += moved
+        if not routes or max(r.time_s for r in trial) < max(r.time_s for r in routes):
+            routes = trial
+    # The time left: a long round of re-solves, then moves again while they help.
+    while time.perf_counter() < deadline:
+        _, improved = descend(routes, deadline, long_round=True)
+        if not improved:
+            break
+        moved, _ = descend(routes, deadline, long_round=False)
+        moves += moved
     owners = _owners(routes)
     return FleetTours(
         orders=tuple(tuple(r.order) for r in routes),
