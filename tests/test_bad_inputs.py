@@ -275,6 +275,56 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--targets", str(BAD / "geojson_crs_link.geojson")],
         ["geojson_crs_link.geojson", "does not name a CRS", "in WGS84"],
     ),
+    "fleet_unknown_key": (
+        ["--fleet", str(BAD / "fleet_unknown_key.toml")],
+        ["fleet_unknown_key.toml", "[[vehicle]] 1", "unknown key 'spead_m_s'", "speed_m_s"],
+    ),
+    "fleet_home_without_lon": (
+        ["--fleet", str(BAD / "fleet_home_without_lon.toml")],
+        ["fleet_home_without_lon.toml", "[[vehicle]] 1", "add home_lon"],
+    ),
+    "fleet_speed_not_a_number": (
+        ["--fleet", str(BAD / "fleet_speed_not_a_number.toml")],
+        ["fleet_speed_not_a_number.toml", "speed_m_s = 'fast' is not a number", "m/s"],
+    ),
+    "fleet_speed_zero": (
+        ["--fleet", str(BAD / "fleet_speed_zero.toml")],
+        ["fleet_speed_zero.toml", "[[vehicle]] 2", "speed_m_s = 0", "0.1 to 50"],
+    ),
+    "fleet_not_toml": (
+        ["--fleet", str(BAD / "fleet_not_toml.toml")],
+        ["fleet_not_toml.toml", "not valid TOML"],
+    ),
+    "fleet_no_vehicle_table": (
+        ["--fleet", str(BAD / "fleet_no_vehicle_table.toml")],
+        ["fleet_no_vehicle_table.toml", "'vehicles'", "[[vehicle]]"],
+    ),
+    "fleet_home_off_dem": (
+        ["--fleet", str(BAD / "fleet_home_off_dem.toml")],
+        ["home (vehicle 2 of --fleet", "fleet_home_off_dem.toml", "outside DEM"],
+    ),
+    "fleet_vehicles_disagree": (
+        ["--fleet", str(BAD / "fleet_home_off_dem.toml"), "--vehicles", "3"],
+        ["--vehicles 3", "2 vehicles of --fleet", "make them agree"],
+    ),
+    "fleet_vehicles_zero": (["--vehicles", "0"], ["--vehicles 0", "below 1"]),
+    "fleet_layers_over_max_agl": (
+        ["--vehicles", "8"],
+        ["layer 7 (vehicle 7)", "over --max-agl 120 m", "--layer-spacing"],
+    ),
+    "fleet_layer_spacing_zero": (
+        ["--vehicles", "2", "--layer-spacing", "0"],
+        ["--layer-spacing 0.0", "positive"],
+    ),
+    "fleet_separation_unknown": (
+        ["--vehicles", "2", "--separation", "sideways"],
+        ["--separation 'sideways'", "altitude or time"],
+    ),
+    "fleet_upload": (["--vehicles", "2", "--upload"], ["--upload", "upload --fleet"]),
+    "fleet_time_too_close": (
+        ["--vehicles", "2", "--separation", "time", "--min-separation", "1000"],
+        ["vehicles 1 and 2 come within", "1000 m required", "--separation altitude"],
+    ),
 }
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,7 @@ from matplotlib.transforms import Affine2D
 from urpt_gcs.mission import waypoint_positions
 from urpt_gcs.planner import Plan
 from urpt_gcs.report import flown_stops, sortie_colour
-from urpt_gcs.terrain import WGS84, FloatArray
+from urpt_gcs.terrain import WGS84, FloatArray, Terrain
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.
 _MAX_DISPLAY_PX = 1600
@@ -151,10 +152,8 @@ def _camera_words(data: dict[str, Any]) -> str:
     return f"frame {w:g}x{h:g} mm / {camera['focal_mm']:g} mm{gsd}"
 
 
-def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
-    """The map as a matplotlib figure; each sortie's route is the line with gid
-    ``sortie N``."""
-    terrain = plan.terrain
+def _terrain_figure(terrain: Terrain) -> tuple[Figure, Any]:
+    """A figure with the DSM drawn hillshaded and tinted, in the planning CRS."""
     step = max(1, math.ceil(max(terrain.elevation_m.shape) / _MAX_DISPLAY_PX))
     z = np.asarray(terrain.elevation_m[::step, ::step], dtype=np.float64)
     t = terrain.transform
@@ -182,7 +181,13 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     hole.set_transform(pixel_to_map + ax.transData)
     bar = fig.colorbar(tint, ax=ax, shrink=0.6, pad=0.01)
     bar.set_label("elevation (m, DEM datum); red: no data")
+    return fig, ax
 
+
+def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
+    """The map as a matplotlib figure; each sortie's route is the line with gid
+    ``sortie N``."""
+    fig, ax = _terrain_figure(plan.terrain)
     palette = [f"C{k % 10}" for k in range(len(plan.regions))]
     for region, colour in zip(plan.regions, palette, strict=True):
         if region.polygon.is_empty:
@@ -342,3 +347,69 @@ def _scale_bar_and_north(ax: Any, lo: FloatArray, hi: FloatArray) -> None:
         fontweight="bold",
         zorder=12,
     )
+
+
+def render_fleet_map(plans: Sequence[Plan], title: str) -> bytes:
+    """A PNG of a fleet's plans: each vehicle's regions, targets, routes and home in its own
+    colour over the DSM of the widest window (the highest layer's)."""
+    fig = fleet_figure(plans, title)
+    out = io.BytesIO()
+    fig.savefig(out, format="png")
+    return out.getvalue()
+
+
+def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
+    """The fleet map as a matplotlib figure; vehicle k's routes are the lines with gid
+    ``vehicle k sortie N``."""
+    widest = max(plans, key=lambda p: p.terrain.elevation_m.size)
+    fig, ax = _terrain_figure(widest.terrain)
+    to_map = pyproj.Transformer.from_crs(WGS84, widest.crs, always_xy=True)
+    drawn = []
+    for number, plan in enumerate(plans, start=1):
+        colour = sortie_colour(number)
+        for region in plan.regions:
+            if region.polygon.is_empty:
+                continue
+            ring = np.asarray(region.polygon.exterior.coords)
+            drawn.append(ring)
+            ax.add_patch(
+                PolygonPatch(ring, closed=True, facecolor=colour, alpha=0.15, edgecolor=colour)
+            )
+        tx, ty = plan.targets_xy[:, 0], plan.targets_xy[:, 1]
+        ax.scatter(tx, ty, marker="^", s=50, color=colour, edgecolors="black", zorder=5)
+        for x, y, t in zip(tx, ty, plan.targets.targets, strict=True):
+            ax.annotate(t.name, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=6)
+        label = (
+            f"vehicle {number}: {len(plan.targets.targets)} targets, "
+            f"{plan.flown_length_m:.0f} m, {plan.flight_time_s / 60:.1f} min at "
+            f"{plan.camera.altitude_m:.0f} m"
+        )
+        for k, route in enumerate(sortie_routes(plan, to_map), start=1):
+            drawn.append(route)
+            ax.plot(route[:, 0], route[:, 1], "-", color="black", linewidth=2.4, zorder=7)
+            ax.plot(
+                route[:, 0],
+                route[:, 1],
+                "-",
+                color=colour,
+                linewidth=1.4,
+                zorder=8,
+                label=label if k == 1 else None,
+                gid=f"vehicle {number} sortie {k}",
+            )
+        hx, hy = plan.home_xy
+        ax.scatter([hx], [hy], marker="*", s=220, color=colour, edgecolors="black", zorder=11)
+    everything = np.vstack(drawn)
+    lo, hi = everything.min(axis=0), everything.max(axis=0)
+    pad = 0.08 * float(max(hi - lo)) + 5.0
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    _scale_bar_and_north(ax, lo - pad, hi + pad)
+    ax.set_xlabel(f"easting (m, {widest.crs.name})")
+    ax.set_ylabel("northing (m)")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.tick_params(labelsize=7)
+    ax.set_title(title, fontsize=10)
+    ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
+    fig.tight_layout()
+    return fig

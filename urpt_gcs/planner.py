@@ -478,6 +478,20 @@ def plan(
     stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
     tour = solve(instance, solver, settings.solve)
     stages.lap("solve")
+    return finish_plan(site, area, regions, instance, tour, settings, stages)
+
+
+def finish_plan(
+    site: _Site,
+    area: _Area,
+    regions: tuple[Region, ...],
+    instance: Instance,
+    tour: Tour,
+    settings: PlanSettings,
+    stages: _Stages,
+) -> Plan:
+    """From the solver's tour to the checked plan: stops given their margin, ordered and cut
+    into sorties, written as missions and checked as written."""
     stages.say(f"stops seeing from anywhere within {settings.position_tolerance_m:g} m")
     tour, margin_warnings = robust_tour(
         area.terrain,

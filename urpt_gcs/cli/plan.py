@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
 
 import click
 
@@ -17,6 +18,9 @@ from urpt_gcs.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
 from urpt_gcs.visibility import DEFAULT_HEADINGS
+
+if TYPE_CHECKING:
+    from urpt_gcs.fleet import FleetSettings
 
 
 @main.command("plan")
@@ -163,6 +167,42 @@ from urpt_gcs.visibility import DEFAULT_HEADINGS
     help="Also write the planning instance as a GTSPLIB file (EUC_2D, centimetres).",
 )
 @click.option(
+    "--vehicles",
+    type=int,
+    default=1,
+    show_default=True,
+    help="Vehicles flying at once; the targets are shared out for the earliest last landing.",
+)
+@click.option(
+    "--fleet",
+    "fleet_file",
+    type=click.Path(dir_okay=True, path_type=Path),
+    default=None,
+    help="TOML file, one [[vehicle]] table per vehicle (home_lat, home_lon, speed_m_s, "
+    "endurance_min, altitude_m; missing keys take the plan's values).",
+)
+@click.option(
+    "--separation",
+    type=str,
+    default="altitude",
+    show_default=True,
+    help="Fleet: altitude (a layer per vehicle) or time (one layer, tracks checked).",
+)
+@click.option(
+    "--layer-spacing",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Fleet, --separation altitude: metres between the vehicles' layers.",
+)
+@click.option(
+    "--min-separation",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Fleet, --separation time: least horizontal distance between vehicles, metres.",
+)
+@click.option(
     "--upload", "do_upload", is_flag=True, help="Upload the mission and verify its read-back."
 )
 @click.option(
@@ -211,6 +251,11 @@ def plan_command(
     as_json: bool,
     quiet: bool,
     export_gtsp: Path | None,
+    vehicles: int,
+    fleet_file: Path | None,
+    separation: str,
+    layer_spacing: float,
+    min_separation: float,
     do_upload: bool,
     connect: str,
     retries: int,
@@ -221,6 +266,20 @@ def plan_command(
     from urpt_gcs.report import summary_text
 
     try:
+        fleet = _fleet(vehicles, fleet_file, separation, layer_spacing, min_separation)
+        if fleet is not None:
+            for flag, given in (
+                ("--upload", do_upload),
+                ("--export-gtsp", export_gtsp is not None),
+                ("--altitude auto", altitude is not None and altitude.strip().lower() == "auto"),
+            ):
+                if given:
+                    fix = (
+                        "upload each vehicle with urpt-gcs upload --fleet"
+                        if flag == "--upload"
+                        else f"plan one vehicle for {flag}, or drop it"
+                    )
+                    raise SettingsError(f"{flag} is not available for a fleet plan: {fix}")
         # Everything about the outputs that can be known now is checked before the planning.
         destination = check_out(Path(out))
         export = None
@@ -270,6 +329,11 @@ def plan_command(
         # the summary, so stderr holds nothing but the error. Nothing with --quiet or --json.
         live = sys.stderr.isatty()
         stream = sys.stderr if live else sys.stdout
+        if fleet is not None:
+            _plan_fleet(
+                Path(dem), Path(targets), settings, fleet, Path(out), no_map, as_json, quiet, stream
+            )
+            return
         with StageProgress(stream, time_limit, live=live) as progress:
             say = None if quiet or as_json else progress
             if auto:
@@ -308,6 +372,68 @@ def plan_command(
 
         fence = Geofence.inclusion(result.geofence_latlon)
         upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json, fence)
+
+
+def _fleet(
+    vehicles: int,
+    fleet_file: Path | None,
+    separation: str,
+    layer_spacing: float,
+    min_separation: float,
+) -> FleetSettings | None:
+    """The fleet the flags ask for; None for one vehicle without --fleet (the plain plan)."""
+    from urpt_gcs.fleet import FleetSettings, VehicleSpec, read_fleet
+
+    if vehicles < 1:
+        raise SettingsError(f"--vehicles {vehicles} is below 1: give how many vehicles fly")
+    if fleet_file is None:
+        if vehicles == 1:
+            return None
+        specs = tuple(VehicleSpec() for _ in range(vehicles))
+        source = f"--vehicles {vehicles}"
+    else:
+        specs = read_fleet(fleet_file)
+        source = f"--fleet {fleet_file}"
+        if vehicles not in (1, len(specs)):
+            raise SettingsError(
+                f"--vehicles {vehicles} disagrees with the {len(specs)} vehicles of --fleet "
+                f"{fleet_file}: drop --vehicles or make them agree"
+            )
+    return FleetSettings(
+        specs,
+        separation=separation,  # type: ignore[arg-type]  # validated in __post_init__
+        layer_spacing_m=layer_spacing,
+        min_separation_m=min_separation,
+        source=source,
+    )
+
+
+def _plan_fleet(
+    dem: Path,
+    targets: Path,
+    settings: PlanSettings,
+    fleet: FleetSettings,
+    out: Path,
+    no_map: bool,
+    as_json: bool,
+    quiet: bool,
+    stream: TextIO,
+) -> None:
+    from urpt_gcs.fleet import plan_fleet_mission
+    from urpt_gcs.fleet_output import check_fleet_out, fleet_summary_text, write_fleet_products
+
+    destinations = check_fleet_out(out, len(fleet.vehicles))
+    live = sys.stderr.isatty()
+    with StageProgress(stream, settings.solve.time_limit_s, live=live) as progress:
+        say = None if quiet or as_json else progress
+        result = plan_fleet_mission(dem, targets, settings, fleet, progress=say)
+        if say is not None:
+            say("writing outputs")
+        data = write_fleet_products(result, destinations, with_map=not no_map)
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+    elif not quiet:
+        click.echo(fleet_summary_text(data))
 
 
 @main.command("demo-site")

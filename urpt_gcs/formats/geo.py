@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -189,12 +190,48 @@ def _styles(doc: ET.Element, q: str, sorties: int) -> None:
 def plan_kml(plan: Plan) -> str:
     """The plan as a KML document: folders of regions, targets and home, and one folder per
     sortie with its route and its numbered stops; a style per kind and per sortie."""
+    return _kml(_features(plan), len(plan.sorties), "Sortie")
+
+
+def _fleet_features(plans: Sequence[Plan]) -> list[_Feature]:
+    """Every vehicle's features, its routes and stops in the vehicle's colour (``sortie`` is
+    the vehicle's number here) and every feature's properties naming its vehicle."""
+    out = []
+    for number, plan in enumerate(plans, start=1):
+        for f in _features(plan):
+            grouped = f.sortie is not None
+            properties = {**f.properties, "vehicle": number}
+            if f.kind == "sortie":
+                properties["colour"] = sortie_colour(number)
+            name = f.name if f.kind in ("region", "target") else f"vehicle {number} {f.name}"
+            out.append(
+                replace(
+                    f,
+                    name=name,
+                    sortie=number if grouped else None,
+                    properties=properties,
+                )
+            )
+    return out
+
+
+def fleet_kml(plans: Sequence[Plan]) -> str:
+    """A fleet's plans as one KML document: a folder and a colour per vehicle."""
+    return _kml(_fleet_features(plans), len(plans), "Vehicle")
+
+
+def fleet_geojson(plans: Sequence[Plan]) -> str:
+    """A fleet's plans as one GeoJSON FeatureCollection; every feature has a ``vehicle``."""
+    return _geojson(_fleet_features(plans))
+
+
+def _kml(features: list[_Feature], groups: int, group_word: str) -> str:
     ET.register_namespace("", KML_NS)
     q = f"{{{KML_NS}}}"
     kml = ET.Element(f"{q}kml")
     doc = ET.SubElement(kml, f"{q}Document")
     ET.SubElement(doc, f"{q}name").text = "urpt-gcs plan"
-    _styles(doc, q, len(plan.sorties))
+    _styles(doc, q, groups)
     folders: dict[str, ET.Element] = {}
 
     def folder(key: str, name: str) -> ET.Element:
@@ -206,11 +243,12 @@ def plan_kml(plan: Plan) -> str:
     folder("region", "Visibility regions")
     folder("target", "Targets")
     folder("home", "Home")
-    for f in _features(plan):
+    for f in features:
         if f.sortie is None:
             parent, style = folders[f.kind], f.kind
         else:
-            parent, style = folder(f"sortie {f.sortie}", f"Sortie {f.sortie}"), f"sortie-{f.sortie}"
+            key = f"{group_word} {f.sortie}"
+            parent, style = folder(key.lower(), key), f"sortie-{f.sortie}"
         mark = ET.SubElement(parent, f"{q}Placemark")
         ET.SubElement(mark, f"{q}name").text = f.name
         ET.SubElement(mark, f"{q}description").text = f.description
@@ -241,8 +279,12 @@ def plan_kml(plan: Plan) -> str:
 
 def plan_geojson(plan: Plan) -> str:
     """The plan as a GeoJSON FeatureCollection (see the module docstring for properties)."""
+    return _geojson(_features(plan))
+
+
+def _geojson(plan_features: list[_Feature]) -> str:
     features: list[dict[str, Any]] = []
-    for f in _features(plan):
+    for f in plan_features:
         if f.kind == "region":
             geometry: dict[str, Any] = {
                 "type": "Polygon",

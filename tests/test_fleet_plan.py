@@ -1,0 +1,351 @@
+"""Fleet planning: the makespan bound and the planner against brute force, the separation
+along tracks against dense sampling, and fleet plans of the demo and a real raster checked
+independently on every vehicle's written mission."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import DEMO, REAL_DEMS, needs_shared
+from independent import check_mission, load_raster, read_waypoints_file
+from test_plan import _valid_targets
+
+from urpt_gcs.cli import main
+from urpt_gcs.fleet import Track, closest
+from urpt_gcs.gtsp import Geometry, Instance
+from urpt_gcs.safety import FlightModel
+from urpt_gcs.solvers import solve
+from urpt_gcs.solvers.base import SolveSettings
+from urpt_gcs.solvers.fleet import Vehicle, makespan_bound, plan_fleet, restrict
+from urpt_gcs.targets import read_targets
+
+ALTITUDE_M = 40.0
+FOV_DEG = 30.0
+
+
+def _tiny_fleet(
+    seed: int, vehicles: int, endurance_s: float | None = None
+) -> tuple[list[Vehicle], Instance]:
+    """Four targets, two viewpoints each inside the cone (a viewpoint sees every target
+    whose cone holds it), and homes of their own."""
+    rng = np.random.default_rng(seed)
+    targets = rng.uniform(0.0, 400.0, (4, 2))
+    cone = ALTITUDE_M * math.tan(math.radians(FOV_DEG))
+    angle = rng.uniform(0.0, 2.0 * math.pi, 8)
+    radius = cone * np.sqrt(rng.uniform(0.0, 0.95, 8))
+    points = np.repeat(targets, 2, axis=0) + radius[:, None] * np.column_stack(
+        [np.cos(angle), np.sin(angle)]
+    )
+    near = np.hypot(*(points[:, None, :] - targets[None, :, :]).transpose(2, 0, 1)) <= cone
+    vp, tg = np.nonzero(near)
+    geometry = Geometry(targets, np.zeros(4), ALTITUDE_M, FOV_DEG, 0.0)
+    homes = rng.uniform(0.0, 400.0, (vehicles, 2))
+    out = []
+    for k in range(vehicles):
+        inst = Instance.from_cover_pairs(
+            vp, tg, points, 4, depot_xy=(float(homes[k, 0]), float(homes[k, 1])), geometry=geometry
+        )
+        model = FlightModel.arducopter(cruise_m_s=4.0 + k, hold_s=2.0)
+        out.append(Vehicle(inst, model, ALTITUDE_M, endurance_s))
+    return out, out[0].instance
+
+
+def _brute_makespan(vehicles: list[Vehicle]) -> float:
+    """All assignments of the targets to the vehicles, each vehicle's least flight time over
+    every sequence of distinct viewpoints that sees its share (a share of s targets never
+    needs more than s stops, and a stop left out never lengthens a flight)."""
+    m = vehicles[0].instance.n_targets
+    best = []
+    for vehicle in vehicles:
+        inst = vehicle.instance
+        assert inst.points_xy is not None
+        covers = inst.covers.dense()
+        least = np.full(1 << m, math.inf)
+        least[0] = 0.0
+        for size in range(1, m + 1):
+            for seq in itertools.permutations(range(inst.n_viewpoints), size):
+                seen = covers[list(seq)].any(axis=0)
+                mask = int(sum(1 << t for t in np.flatnonzero(seen)))
+                least[mask] = min(least[mask], vehicle.time_s(inst.points_xy[list(seq)]))
+        # Seeing more than a share is as good as seeing the share.
+        for mask in range(1 << m):
+            for sup in range(1 << m):
+                if sup & mask == mask:
+                    least[mask] = min(least[mask], least[sup])
+        best.append(least)
+    value = math.inf
+    for assignment in itertools.product(range(len(vehicles)), repeat=m):
+        masks = [0] * len(vehicles)
+        for t, k in enumerate(assignment):
+            masks[k] |= 1 << t
+        value = min(value, max(best[k][masks[k]] for k in range(len(vehicles))))
+    return value
+
+
+@pytest.mark.parametrize(
+    ("seed", "count", "endurance_s"),
+    [(0, 2, None), (3, 3, None), (2, 2, 200.0), (7, 2, 180.0), (8, 3, 230.0)],
+)
+def test_bound_and_planned_makespan_bracket_the_brute_force_optimum(
+    seed: int, count: int, endurance_s: float | None
+) -> None:
+    """With an endurance, flights are cut into sorties (the brute force cuts each of its
+    sequences at its best, as the planner does)."""
+    vehicles, reference = _tiny_fleet(seed, count, endurance_s)
+    optimum = _brute_makespan(vehicles)
+    single = solve(reference, "exact", SolveSettings(time_limit_s=0.5))
+    tours = plan_fleet(vehicles, single.order, reference, "exact", SolveSettings(time_limit_s=1.0))
+    bound = makespan_bound(vehicles, single.lower_bound)
+    assert 0.0 < bound.bound_s <= optimum + 1e-6
+    assert tours.makespan_s >= optimum - 1e-6
+    # The tours are real: every target seen by some vehicle, each time measured again here.
+    seen = np.zeros(4, dtype=bool)
+    for vehicle, order, time_s in zip(vehicles, tours.orders, tours.times_s, strict=True):
+        seen |= vehicle.instance.covers.seen(list(order))
+        assert vehicle.instance.points_xy is not None
+        assert vehicle.time_s(vehicle.instance.points_xy[list(order)]) == pytest.approx(time_s)
+    assert seen.all()
+    # The search never ends worse than where it started.
+    assert tours.makespan_s <= max(tours.start_times_s) + 1e-9
+
+
+@pytest.mark.parametrize(
+    "model",
+    [
+        FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0),
+        FlightModel.arducopter(cruise_m_s=12.0, hold_s=0.0, accel_m_s2=1.0),
+        FlightModel.px4(cruise_m_s=8.0, hold_s=2.0),
+    ],
+)
+def test_leg_times_grow_and_are_subadditive(model: FlightModel) -> None:
+    """The reach bound needs it: a chain of legs is never quicker than one leg of their sum."""
+    d = np.concatenate([np.linspace(0.0, 6.0, 301), np.linspace(6.0, 400.0, 400)])
+    a, b = np.meshgrid(d, d)
+    for leg in (model.leg_s, model.return_s):
+        assert (np.diff(leg(d)) >= 0.0).all()
+        assert (leg(a) + leg(b) >= leg(a + b) - 1e-9).all()
+    fastest = np.minimum(model.leg_s(d), model.return_s(d))
+    faster = model.return_s if model.return_m_s >= model.cruise_m_s else model.leg_s
+    assert np.allclose(fastest, faster(d))
+
+
+def test_restrict_keeps_exactly_the_viewpoints_and_pairs_of_the_share() -> None:
+    _, reference = _tiny_fleet(7, 1)
+    dense = reference.covers.dense()
+    share = [3, 1]
+    sub, kept = restrict(reference, share)
+    expect = np.flatnonzero(dense[:, share].any(axis=1))
+    assert kept.tolist() == expect.tolist()
+    assert (sub.covers.dense() == dense[np.ix_(kept, share)]).all()
+    assert sub.points_xy is not None and reference.points_xy is not None
+    assert (sub.points_xy == reference.points_xy[kept]).all()
+
+
+def _random_track(rng: np.random.Generator, start_s: float) -> Track:
+    n = 8
+    t = start_s + np.cumsum(rng.uniform(1.0, 20.0, n))
+    xyz = rng.uniform(-50.0, 50.0, (n, 3))
+    air = rng.uniform(size=n - 1) < 0.8
+    return Track(t, xyz, air)
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("horizontal", [False, True])
+def test_closest_approach_matches_dense_sampling(seed: int, horizontal: bool) -> None:
+    rng = np.random.default_rng(seed)
+    a, b = _random_track(rng, 0.0), _random_track(rng, rng.uniform(0.0, 30.0))
+    found = closest(a, b, horizontal)
+    lo, hi = max(a.t_s[0], b.t_s[0]), min(a.t_s[-1], b.t_s[-1])
+    t = np.linspace(lo, hi, 200_001)
+
+    def sample(tr: Track) -> tuple[np.ndarray, np.ndarray]:
+        pos = np.column_stack([np.interp(t, tr.t_s, tr.xyz[:, i]) for i in range(3)])
+        seg = np.clip(np.searchsorted(tr.t_s, t, side="right") - 1, 0, len(tr.airborne) - 1)
+        return pos, tr.airborne[seg]
+
+    pa, fa = sample(a)
+    pb, fb = sample(b)
+    d = pa - pb
+    if horizontal:
+        d[:, 2] = 0.0
+    dist = np.linalg.norm(d, axis=1)[fa & fb]
+    if dist.size == 0:
+        assert found is None
+        return
+    assert found is not None
+    assert found[0] <= dist.min() + 1e-9
+    # Dense samples come within one step's travel of the true least distance.
+    step = (hi - lo) / 200_000 * 2.0 * 50.0
+    assert dist.min() - found[0] <= step + 1e-6
+
+
+def _fleet_run(tmp_path: Path, dem: Path, targets: Path, *extra: str) -> dict:
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        main,
+        [
+            "plan",
+            "--dem",
+            str(dem),
+            "--targets",
+            str(targets),
+            "--out",
+            str(out),
+            "--time-limit",
+            "1.5",
+            "--json",
+            *extra,
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    data: dict = json.loads((out / "summary.json").read_text())
+    return data
+
+
+def _check_fleet_folder(
+    out: Path, dem: Path, targets: list[tuple[str, float, float]], data: dict, spacing: float
+) -> None:
+    fleet = data["fleet"]
+    by_name = {name: (name, lat, lon) for name, lat, lon in targets}
+    seen: set[str] = set()
+    layers = []
+    raster = load_raster(dem)
+    for v in fleet["vehicles"]:
+        folder = out / v["dir"]
+        files = sorted(folder.glob("mission*.waypoints"))
+        assert len(files) == v["sorties"]
+        mine = [by_name[n] for n in v["targets"]]
+        # Seen from the vehicle's own written waypoints at its own layer; legs clear.
+        assert check_mission(dem, files, mine, fov_deg=30.0, min_clearance_m=10.0) == []
+        seen |= set(v["targets"])
+        flown = read_waypoints_file(files[0])
+        amsl = {round(w[2], 2) for f in files for w in read_waypoints_file(f).waypoints}
+        assert len(amsl) == 1
+        layer = amsl.pop()
+        layers.append(layer)
+        home_ground = float(raster.height(np.array([flown.home[1]]), np.array([flown.home[0]]))[0])
+        assert layer - home_ground <= 120.0 + 0.05
+        own = json.loads((folder / "summary.json").read_text())
+        assert own["flight_time_s"] == pytest.approx(v["flight_time_s"], abs=0.1)
+    assert seen == set(by_name)
+    if fleet["separation"]["mode"] == "altitude":
+        ordered = sorted(layers)
+        assert all(b - a >= spacing - 0.05 for a, b in itertools.pairwise(ordered))
+    finish = [v["start_delay_s"] + v["flight_time_s"] for v in fleet["vehicles"]]
+    assert fleet["makespan_s"] == pytest.approx(max(finish), abs=0.2)
+    assert fleet["makespan_s"] >= fleet["makespan_bound_s"] > 0.0
+
+
+def _demo_targets() -> list[tuple[str, float, float]]:
+    return [(t.name, t.lat_deg, t.lon_deg) for t in read_targets(DEMO / "targets.kml").targets]
+
+
+@pytest.mark.parametrize("count", [2, 3])
+def test_demo_fleet_sees_every_target_from_distinct_layers(tmp_path: Path, count: int) -> None:
+    extra = ["--vehicles", str(count)] + (["--no-map"] if count == 3 else [])
+    data = _fleet_run(tmp_path, DEMO / "site.tif", DEMO / "targets.kml", *extra)
+    assert len(data["fleet"]["vehicles"]) == count
+    _check_fleet_folder(tmp_path / "out", DEMO / "site.tif", _demo_targets(), data, 10.0)
+    closest_m = data["fleet"]["separation"]["closest_approach_m"]
+    assert closest_m is not None and closest_m >= 10.0 - 0.05
+    geo = json.loads((tmp_path / "out" / "plan.geojson").read_text())
+    routes = [f["properties"] for f in geo["features"] if f["properties"]["kind"] == "sortie"]
+    assert {r["vehicle"] for r in routes} == set(range(1, count + 1))
+    colours = {r["vehicle"]: r["colour"] for r in routes}
+    assert len(set(colours.values())) == count
+    assert ((tmp_path / "out" / "map.png").exists()) == (count == 2)
+    kml = ET.parse(tmp_path / "out" / "plan.kml").getroot()
+    q = "{http://www.opengis.net/kml/2.2}"
+    folders = {f.findtext(f"{q}name") for f in kml.iter(f"{q}Folder")}
+    assert {f"Vehicle {k}" for k in range(1, count + 1)} <= folders
+
+
+def test_time_separation_from_homes_of_their_own(tmp_path: Path) -> None:
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(
+        "[[vehicle]]\nhome_lat = 47.68876\nhome_lon = 9.42309\n\n"
+        "[[vehicle]]\nhome_lat = 47.68990\nhome_lon = 9.42150\nspeed_m_s = 6.0\n"
+    )
+    data = _fleet_run(
+        tmp_path,
+        DEMO / "site.tif",
+        DEMO / "targets.kml",
+        "--fleet",
+        str(fleet),
+        "--separation",
+        "time",
+        "--min-separation",
+        "15",
+        "--no-map",
+    )
+    _check_fleet_folder(tmp_path / "out", DEMO / "site.tif", _demo_targets(), data, 0.0)
+    f = data["fleet"]
+    assert {v["altitude_m"] for v in f["vehicles"]} == {f["vehicles"][0]["altitude_m"]}
+    assert f["vehicles"][1]["speed_m_s"] == 6.0
+    assert f["vehicles"][1]["home_lat"] == pytest.approx(47.68990, abs=1e-7)
+    assert f["separation"]["closest_horizontal_m"] >= 15.0
+
+
+def test_one_vehicle_is_the_plain_plan(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """--vehicles 1 runs exactly the single-vehicle plan, with the same settings."""
+    import urpt_gcs.fleet
+    import urpt_gcs.planner
+
+    calls = []
+
+    def record(*args: object, **kwargs: object) -> None:
+        calls.append(args)
+        raise SystemExit(0)
+
+    def no_fleet(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the fleet planner ran for one vehicle")
+
+    monkeypatch.setattr(urpt_gcs.planner, "plan", record)
+    monkeypatch.setattr(urpt_gcs.fleet, "plan_fleet_mission", no_fleet)
+    base = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
+    for extra in ([], ["--vehicles", "1"]):
+        CliRunner().invoke(main, [*base, "--out", str(tmp_path / "o"), *extra])
+    assert len(calls) == 2
+    assert calls[0] == calls[1]
+
+
+@needs_shared(REAL_DEMS)
+def test_real_raster_fleet(tmp_path: Path) -> None:
+    dem = REAL_DEMS / "odm_dsm_utm51n.tif"
+    targets = _valid_targets(dem, 10, seed=3)
+    csv = tmp_path / "targets.csv"
+    csv.write_text(
+        "name,lat,lon\n" + "".join(f"{n},{lat:.9f},{lon:.9f}\n" for n, lat, lon in targets)
+    )
+    data = _fleet_run(tmp_path, dem, csv, "--vehicles", "2", "--no-map")
+    _check_fleet_folder(tmp_path / "out", dem, targets, data, 10.0)
+
+
+def test_track_follows_the_plan_through_every_stop_in_the_planned_time() -> None:
+    """Sorties back to back: the track's length in time is the plan's flight time (summed by
+    the sortie splitter), it passes over every stop at the plane and starts and ends on the
+    ground at home."""
+    from urpt_gcs.fleet import track
+    from urpt_gcs.planner import PlanSettings, plan
+
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=0.5), endurance_min=4.0)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    assert len(result.sorties) > 1
+    tr = track(result)
+    assert tr.t_s[-1] == pytest.approx(result.flight_time_s, abs=1e-6)
+    ground = result.mission.home.amsl_m
+    eye = ground + result.altitude_rel_m
+    assert tr.xyz[0].tolist() == pytest.approx([*result.home_xy, ground])
+    assert tr.xyz[-1].tolist() == pytest.approx([*result.home_xy, ground])
+    assert result.tour.points_xy is not None
+    for x, y in result.tour.points_xy.tolist():
+        at = np.flatnonzero(np.hypot(tr.xyz[:, 0] - x, tr.xyz[:, 1] - y) < 1e-9)
+        assert at.size >= 2 and np.allclose(tr.xyz[at, 2], eye)
+    assert not tr.airborne[0] and not tr.airborne[-1]

@@ -1,0 +1,787 @@
+"""A fleet: K closed tours from their homes that between them see every target, the longest
+flight (the makespan) as short as it can be made, and a lower bound on that makespan.
+
+Each vehicle has its own instance (its layer's viewpoints and cover sets, its home as the
+depot) and its own flight model; a tour's time is the single-vehicle estimate, its stops cut
+into sorties within the vehicle's endurance where needed. The search starts from the naive
+split (the single-vehicle tour cut into K contiguous pieces of balanced time, each re-solved
+on its vehicle's layer) and then moves stops off the vehicle that lands last: a stop is taken
+out, the targets only it saw are put on another vehicle (the cheapest insertion of a viewpoint
+of that vehicle's layer seeing each), and the move is kept when both new flights are shorter
+than the old longest one. When no move helps, every vehicle's GTSP is re-solved on its targets
+(the ordinary solvers, a short budget each); if that shortens any flight, the moves go on.
+Every value compared is the time of a real tour over the vehicles' own candidates.
+
+Nothing here sees a raster: only instances, points, distances and the flight model.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from urpt_gcs.errors import PlanError, SettingsError
+from urpt_gcs.gtsp import Covers, Geometry, Instance
+from urpt_gcs.safety import FlightModel, split_sorties
+from urpt_gcs.solvers.base import SolveSettings
+from urpt_gcs.terrain import FloatArray
+
+IntArray = npt.NDArray[np.int64]
+
+# A move must shorten the flights it changes by this much to be kept.
+_EPS_S = 1e-6
+# Share of the time limit the single-vehicle tour may take; the rest goes to the fleet search.
+SINGLE_SHARE = 0.4
+# Where else the single tour is cut open for the search's start (shares of its stops), and
+# the share of the search's time that may go to it.
+_ROTATIONS = (1 / 6, 2 / 6, 3 / 6, 4 / 6, 5 / 6)
+_ROTATION_SHARE = 0.25
+# How many of the best cuts the search descends from, within this share of its time.
+_STARTS = 3
+_STARTS_SHARE = 0.6
+# Budget of one vehicle's GTSP re-solve within the search, seconds.
+_RESOLVE_S = 0.3
+
+
+@dataclass(frozen=True, slots=True)
+class Vehicle:
+    """One vehicle of the fleet as the solver sees it.
+
+    ``instance`` holds the viewpoints of the vehicle's layer over every target, with its home
+    as the depot; ``altitude_rel_m`` is the layer's height above that home.
+    """
+
+    instance: Instance
+    model: FlightModel
+    altitude_rel_m: float
+    endurance_s: float | None
+
+    def __post_init__(self) -> None:
+        if self.instance.depot_xy is None or self.instance.points_xy is None:
+            raise ValueError("a fleet vehicle's instance needs its home (depot) and points")
+
+    @property
+    def home_xy(self) -> tuple[float, float]:
+        assert self.instance.depot_xy is not None
+        return self.instance.depot_xy
+
+    def time_s(self, stops_xy: FloatArray) -> float:
+        """Flight time of the stops flown in this order, as sorties within the endurance
+        (infinite when one stop alone does not fit)."""
+        if len(stops_xy) == 0:
+            return 0.0
+        names = [f"stop {k}" for k in range(1, len(stops_xy) + 1)]
+        try:
+            sorties = split_sorties(
+                stops_xy, self.home_xy, self.altitude_rel_m, self.model, self.endurance_s, names
+            )
+        except PlanError:
+            return math.inf
+        return math.fsum(s.flight_time_s for s in sorties)
+
+    def out_and_back_s(self, distance_m: FloatArray) -> FloatArray:
+        """The least flight time of any sortie that reaches a point ``distance_m`` from home
+        and stops there: take-off, a way out and a way back each at least that long (at the
+        faster of the cruise and return speeds), one stop, the landing."""
+        m = self.model
+        d = np.asarray(distance_m, dtype=np.float64)
+        fastest = np.minimum(m.leg_s(d), m.return_s(d))
+        ends = m.takeoff_s(self.altitude_rel_m) + m.landing_s(self.altitude_rel_m)
+        out: FloatArray = ends + m.stop_s + 2.0 * fastest
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class FleetTours:
+    """The fleet's tours: per vehicle, viewpoints of its own instance in flight order, the
+    targets it is counted for and its flight time. ``naive_times_s`` are the naive split's
+    pieces flown as cut (on the reference instance's viewpoints), ``start_times_s`` the same
+    pieces re-solved on each vehicle's own layer, where the search starts."""
+
+    orders: tuple[tuple[int, ...], ...]
+    targets: tuple[tuple[int, ...], ...]
+    times_s: tuple[float, ...]
+    naive_times_s: tuple[float, ...]
+    start_times_s: tuple[float, ...]
+    moves: int
+    resolves: int
+    search_s: float
+
+    @property
+    def makespan_s(self) -> float:
+        return max(self.times_s)
+
+    @property
+    def naive_makespan_s(self) -> float:
+        return max(self.naive_times_s)
+
+
+@dataclass(frozen=True, slots=True)
+class MakespanBound:
+    """A lower bound on the makespan of any fleet plan, and its parts."""
+
+    reach_s: float
+    share_s: float
+    pigeonhole_s: float = 0.0
+
+    @property
+    def bound_s(self) -> float:
+        return max(self.reach_s, self.share_s, self.pigeonhole_s)
+
+
+def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntArray]:
+    """The instance over ``targets`` only (renumbered 0..len-1 in the given order), and the
+    original index of each viewpoint it keeps (those that see one of them)."""
+    keep_t = np.asarray(targets, dtype=np.int64)
+    if keep_t.size == 0:
+        raise ValueError("restrict needs at least one target")
+    new_of = np.full(instance.n_targets, -1, dtype=np.int64)
+    new_of[keep_t] = np.arange(keep_t.size)
+    vp, tg = instance.covers.pairs()
+    mask = new_of[tg] >= 0
+    kept = np.unique(vp[mask])
+    vp_new = np.searchsorted(kept, vp[mask])
+    covers = Covers.from_pairs(vp_new, new_of[tg[mask]], kept.size, keep_t.size)
+    g = instance.geometry
+    geometry = (
+        None
+        if g is None
+        else Geometry(
+            targets_xy=g.targets_xy[keep_t],
+            ground_m=g.ground_m[keep_t],
+            altitude_m=g.altitude_m,
+            fov_deg=g.fov_deg,
+            terrain_max_m=g.terrain_max_m,
+        )
+    )
+    oracle = instance.oracle
+    sub_oracle = None
+    if oracle is not None:
+
+        def sub_oracle(points_xy: FloatArray) -> npt.NDArray[np.bool_]:
+            assert oracle is not None
+            return oracle(points_xy)[:, keep_t]
+
+    depot_distance = None if instance.depot_distance is None else instance.depot_distance[:, kept]
+    owner = None if instance.owner is None else new_of[instance.owner[kept]]
+    sub = Instance(
+        covers=covers,
+        distance=None if instance.distance is None else instance.distance[np.ix_(kept, kept)],
+        depot_distance=depot_distance,
+        points_xy=None if instance.points_xy is None else instance.points_xy[kept],
+        depot_xy=instance.depot_xy,
+        owner=owner,
+        geometry=geometry,
+        oracle=sub_oracle,
+        name=instance.name,
+        heading_deg=None if instance.heading_deg is None else instance.heading_deg[kept],
+    )
+    return sub, kept
+
+
+def with_home(instance: Instance, home_xy: tuple[float, float]) -> Instance:
+    """The same viewpoints with another depot (a vehicle of the same layer at another home)."""
+    assert instance.points_xy is not None
+    pts = instance.points_xy
+    to_home = np.hypot(pts[:, 0] - home_xy[0], pts[:, 1] - home_xy[1])
+    return Instance(
+        covers=instance.covers,
+        depot_distance=np.vstack([to_home, to_home]),
+        points_xy=pts,
+        depot_xy=(float(home_xy[0]), float(home_xy[1])),
+        owner=instance.owner,
+        geometry=instance.geometry,
+        oracle=instance.oracle,
+        name=instance.name,
+        heading_deg=instance.heading_deg,
+    )
+
+
+# Above this many targets the spanning-tree bound (a dense matrix) is left out.
+TREE_BOUND_MAX_TARGETS = 2000
+
+
+def tree_bound_m(
+    targets_xy: FloatArray, radius_m: FloatArray, home_xy: tuple[float, float]
+) -> float:
+    """A lower bound on the total length of closed tours from ``home_xy`` that between them
+    pass within ``radius_m[t]`` of every target ``t``.
+
+    Let ``p_t`` be where target ``t`` is seen. The tours, all through home, form a connected
+    graph through home and every ``p_t``, so their total length is at least the minimum
+    spanning tree of those points; and ``|p_i - p_j| >= |c_i - c_j| - r_i - r_j``, so that tree
+    weighs at least the minimum spanning tree of the centres under those shortened (never
+    negative) distances. None beyond :data:`TREE_BOUND_MAX_TARGETS` targets.
+    """
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
+    m = len(targets_xy)
+    if m == 0 or m > TREE_BOUND_MAX_TARGETS:
+        return 0.0
+    xy = np.vstack([np.asarray(home_xy, dtype=np.float64)[None, :], targets_xy])
+    r = np.concatenate([[0.0], np.asarray(radius_m, dtype=np.float64)])
+    d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    w = np.maximum(d - r[:, None] - r[None, :], 0.0)
+    # The sparse routine reads a zero as no edge: a hair above it keeps every edge.
+    w = np.where(w > 0.0, w, 1e-12)
+    np.fill_diagonal(w, 0.0)
+    return max(float(minimum_spanning_tree(w).sum()) - 1e-9 * m, 0.0)
+
+
+def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) -> MakespanBound:
+    """A lower bound on the makespan of any plan in which the vehicles between them see
+    every target.
+
+    ``reach_s``: some vehicle sees each target ``t``, from a point of its layer's region of
+    ``t``, which lies within the cone radius of ``t`` (the instance geometry's
+    ``cone_radius_m``, the widest the camera reaches). So that vehicle flies a sortie out to a
+    point at least ``d_k(t) = max(|home_k - t| - r_k(t), 0)`` from its home, stops there and
+    comes back: by :meth:`Vehicle.out_and_back_s`. A rest-to-rest leg's least time grows
+    with its length and is subadditive (two legs flown one after the other, stopping between,
+    are one way of flying their sum from rest to rest), so a chain of legs of total length at
+    least ``d`` takes at least one leg of length ``d``; the profile with the faster of the two
+    speeds is never slower than the other. The makespan is at least
+    ``max_t min_k out_and_back_k(d_k(t))``.
+
+    ``share_s``: the total length ``L`` of all the vehicles' flights, with ``J`` the sum of
+    the homes' distances from the first vehicle's home ``h_1``, is at least
+    ``single_bound_m - 2 J`` (the flights joined at their homes, each home joined to ``h_1``
+    by a return trip, make one closed tour from ``h_1`` that sees every target:
+    ``single_bound_m`` bounds any such tour, from any layer flown, which is the caller's to
+    ensure) and at least :func:`tree_bound_m` from ``h_1`` less ``J`` (every home joined to
+    ``h_1`` once), at the widest cone over the layers. A sortie's way home is no longer
+    than its way out to its last stop, so at most half of a sortie is flown at the return
+    speed and the rest at the cruise speed, each leg no faster than its length over its
+    speed. No point sees two targets whose cones of the widest radius are disjoint, so there
+    are at least as many stops as a greedy set of such targets holds, each costing its hold.
+    Those legs and stops, ``W`` seconds in all, are shared by at most K vehicles: one of them
+    flies at least ``W / K``, with a take-off and landing for each sortie, and with an
+    endurance ``E`` a sortie holds at most ``E - ends`` of it, so that vehicle's flight is at
+    least ``max(ends + W / K, W / K * E / (E - ends))`` (the least of these over the vehicles'
+    models).
+
+    ``pigeonhole_s``: see :func:`_pigeonhole_s`.
+    """
+    from urpt_gcs.solvers.base import greedy_disjoint
+
+    if not vehicles:
+        raise ValueError("makespan_bound needs at least one vehicle")
+    geometry = [v.instance.geometry for v in vehicles]
+    reach = pigeonhole = 0.0
+    radius = None
+    if all(g is not None for g in geometry):
+        per_vehicle = []
+        for vehicle, g in zip(vehicles, geometry, strict=True):
+            assert g is not None
+            hx, hy = vehicle.home_xy
+            d = np.hypot(g.targets_xy[:, 0] - hx, g.targets_xy[:, 1] - hy)
+            per_vehicle.append(vehicle.out_and_back_s(np.maximum(d - g.cone_radius_m, 0.0)))
+        least = np.min(np.vstack(per_vehicle), axis=0)
+        reach = float(least.max())
+        radius = np.max(np.vstack([g.cone_radius_m for g in geometry if g is not None]), axis=0)
+        pigeonhole = _pigeonhole_s(vehicles, radius, least)
+    h1 = np.asarray(vehicles[0].home_xy)
+    joins = math.fsum(float(np.hypot(*(np.asarray(v.home_xy) - h1))) for v in vehicles)
+    length = 0.0
+    if single_bound_m is not None:
+        length = max(length, single_bound_m - 2.0 * joins)
+    stops = 0
+    g0 = geometry[0]
+    if radius is not None and g0 is not None:
+        length = max(length, tree_bound_m(g0.targets_xy, radius, vehicles[0].home_xy) - joins)
+        stops = len(greedy_disjoint(g0.targets_xy, float(radius.max())))
+    per_m = min(_seconds_per_metre(v.model) for v in vehicles)
+    work = per_m * length + stops * min(v.model.stop_s for v in vehicles)
+    share = 0.0
+    if work > 0.0:
+        each = work / len(vehicles)
+        ends = [
+            v.model.takeoff_s(v.altitude_rel_m) + v.model.landing_s(v.altitude_rel_m)
+            for v in vehicles
+        ]
+        factor = min(
+            e / (e - end) if e is not None and e > end else 1.0
+            for e, end in zip((v.endurance_s for v in vehicles), ends, strict=True)
+        )
+        share = max(min(ends) + each, factor * each)
+    return MakespanBound(reach_s=reach, share_s=share, pigeonhole_s=pigeonhole)
+
+
+# Targets tried for the pigeonhole bound beyond the K + 1 it needs; all subsets up to this K.
+_PIGEON_SPARE = 3
+_PIGEON_SUBSETS_MAX_K = 6
+
+
+def _pigeonhole_s(vehicles: Sequence[Vehicle], radius_m: FloatArray, reach_s: FloatArray) -> float:
+    """Among K + 1 targets no point sees two of (their widest cones disjoint), some vehicle
+    sees two, from two stops, in one sortie or two; either takes at least a take-off, the
+    way out to one region, across to the other, back home and a landing, with two stops
+    (two sorties take longer still: the way across is no longer than the two ways home).
+    The least such flight over the pairs of the set and the vehicles bounds the makespan;
+    the set is chosen among the targets farthest to reach."""
+    k_count = len(vehicles)
+    g = vehicles[0].instance.geometry
+    assert g is not None
+    m = len(g.targets_xy)
+    if m < k_count + 1:
+        return 0.0
+    pick = np.argsort(-reach_s, kind="stable")[: k_count + 1 + _PIGEON_SPARE]
+    xy, r = g.targets_xy[pick], radius_m[pick]
+    across = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    disjoint = across > r[:, None] + r[None, :]
+    gap = np.maximum(across - r[:, None] - r[None, :], 0.0)
+    pair = np.full(across.shape, math.inf)
+    for vehicle in vehicles:
+        vg = vehicle.instance.geometry
+        assert vg is not None
+        hx, hy = vehicle.home_xy
+        out = np.maximum(np.hypot(xy[:, 0] - hx, xy[:, 1] - hy) - vg.cone_radius_m[pick], 0.0)
+        model = vehicle.model
+
+        def fastest(d: FloatArray, model: FlightModel = model) -> FloatArray:
+            f: FloatArray = np.minimum(model.leg_s(d), model.return_s(d))
+            return f
+
+        ends = model.takeoff_s(vehicle.altitude_rel_m) + model.landing_s(vehicle.altitude_rel_m)
+        legs = fastest(out)
+        flight = ends + 2.0 * model.stop_s + legs[:, None] + fastest(gap) + legs[None, :]
+        pair = np.minimum(pair, flight)
+    candidates = range(len(pick))
+    subsets: Iterable[tuple[int, ...]] = (
+        itertools.combinations(candidates, k_count + 1)
+        if k_count <= _PIGEON_SUBSETS_MAX_K
+        else [tuple(candidates)[: k_count + 1]]
+    )
+    best = 0.0
+    for subset in subsets:
+        idx = np.asarray(subset)
+        block = disjoint[np.ix_(idx, idx)]
+        np.fill_diagonal(block, True)
+        if not block.all():
+            continue
+        values = pair[np.ix_(idx, idx)][np.triu_indices(len(idx), 1)]
+        best = max(best, float(values.min()))
+    return best
+
+
+def _seconds_per_metre(model: FlightModel) -> float:
+    """The least time a metre of flight can take: at most half of it at the return speed
+    (a sortie's way home is no longer than its way out), the rest at the cruise speed."""
+    cruise, back = model.cruise_m_s, model.return_m_s
+    if back <= cruise:
+        return 1.0 / cruise
+    return 0.5 * (1.0 / cruise + 1.0 / back)
+
+
+class _Route:
+    """One vehicle's stops (viewpoints of its instance, in flight order) and its time."""
+
+    def __init__(self, vehicle: Vehicle, order: list[int]) -> None:
+        self.vehicle = vehicle
+        inst = vehicle.instance
+        assert inst.points_xy is not None
+        self.points = inst.points_xy
+        self.order = order
+        self.time_s = vehicle.time_s(self.points[order])
+
+    def seen(self) -> npt.NDArray[np.bool_]:
+        return self.vehicle.instance.covers.seen(self.order)
+
+
+def _viewpoints_by_target(instance: Instance) -> list[IntArray]:
+    vp, tg = instance.covers.pairs()
+    by = np.argsort(tg, kind="stable")
+    bounds = np.searchsorted(tg[by], np.arange(instance.n_targets + 1))
+    return [vp[by[bounds[t] : bounds[t + 1]]] for t in range(instance.n_targets)]
+
+
+def _insert(route: _Route, order: list[int], candidates: IntArray) -> list[int]:
+    """``order`` with the candidate of least added distance at its cheapest place."""
+    home = np.asarray(route.vehicle.home_xy)
+    path = np.vstack([home, route.points[order], home]) if order else np.vstack([home, home])
+    a, b = path[:-1], path[1:]
+    c = route.points[candidates]
+    ab = np.hypot(*(b - a).T)
+    ac = np.hypot(c[:, None, 0] - a[None, :, 0], c[:, None, 1] - a[None, :, 1])
+    cb = np.hypot(c[:, None, 0] - b[None, :, 0], c[:, None, 1] - b[None, :, 1])
+    added = ac + cb - ab[None, :]
+    i, pos = np.unravel_index(int(np.argmin(added)), added.shape)
+    return [*order[:pos], int(candidates[i]), *order[pos:]]
+
+
+def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
+    """Cut points ``0 = c_0 <= ... <= c_K = n`` of the stops into K contiguous pieces, piece
+    ``k`` flown by vehicle ``k`` in the given order from its home, the longest flight least.
+
+    A piece's time only grows as it takes in more stops at either end, so for a given longest
+    flight the greedy cut (each vehicle in turn takes all it can) decides whether one exists;
+    the least such longest flight is found by bisection between the pieces' times.
+    """
+    n, count = len(stops_xy), len(vehicles)
+    # Every vehicle gets a stop while there are enough to go round.
+    least = 1 if n >= count else 0
+
+    def greedy(limit_s: float) -> list[int] | None:
+        cuts = [0]
+        for k, vehicle in enumerate(vehicles):
+            first = cuts[-1]
+            lo, hi = first, n - least * (count - k - 1)
+            if hi < first + least:
+                return None
+            # The largest j whose piece first .. j - 1 fits; a piece only grows with j.
+            while lo < hi:
+                mid = (lo + hi + 1) // 2
+                if vehicle.time_s(stops_xy[first:mid]) <= limit_s:
+                    lo = mid
+                else:
+                    hi = mid - 1
+            if lo < first + least:
+                return None
+            cuts.append(lo)
+        return cuts if cuts[-1] == n else None
+
+    # At the longest flight of the whole tour every piece fits, unless a vehicle cannot fly
+    # some stop within its endurance at all: then the cut must keep it off those stops.
+    whole = [t for t in (v.time_s(stops_xy) for v in vehicles) if math.isfinite(t)]
+    low, high = 0.0, max(whole, default=math.inf)
+    found = greedy(high) if whole else None
+    if found is None:
+        raise SettingsError(
+            "no split of the targets among the vehicles fits every vehicle's endurance: "
+            "raise the endurance in --fleet or --endurance, or add vehicles"
+        )
+    while high - low > max(1e-3, 1e-6 * high):
+        mid = 0.5 * (low + high)
+        cuts = greedy(mid)
+        if cuts is None:
+            low = mid
+        else:
+            high, found = mid, cuts
+    return found
+
+
+def naive_split(
+    vehicles: Sequence[Vehicle], single_order: Sequence[int], reference: Instance
+) -> tuple[list[list[int]], list[float], list[list[int]]]:
+    """The single-vehicle tour (viewpoints of ``reference``) cut into K contiguous pieces of
+    least longest flight, each flown as cut from its vehicle's home: per vehicle the targets
+    first seen in its piece, the pieces' flight times and the pieces themselves."""
+    assert reference.points_xy is not None
+    stops = reference.points_xy[list(single_order)]
+    cuts = _naive_cut(vehicles, stops)
+    covers = reference.covers.dense(list(single_order))
+    first_seen = np.argmax(covers, axis=0)
+    pieces, times, cut = [], [], []
+    for k, vehicle in enumerate(vehicles):
+        lo, hi = cuts[k], cuts[k + 1]
+        pieces.append([int(t) for t in np.flatnonzero((first_seen >= lo) & (first_seen < hi))])
+        times.append(vehicle.time_s(stops[lo:hi]))
+        cut.append([int(v) for v in single_order[lo:hi]])
+    return pieces, times, cut
+
+
+def plan_fleet(
+    vehicles: Sequence[Vehicle],
+    single_order: Sequence[int],
+    reference: Instance,
+    solver: str,
+    settings: SolveSettings,
+) -> FleetTours:
+    """Tours for the fleet of least makespan found within ``settings.time_limit_s``.
+
+    Parameters
+    ----------
+    vehicles
+        The fleet; every instance covers the same targets, in the same numbering.
+    single_order
+        The single-vehicle tour (viewpoints of ``reference``), the start of the search.
+    reference
+        The instance the single-vehicle tour was solved on.
+    solver
+        The GTSP solver for each vehicle's re-solve (any that returns instance viewpoints;
+        ``auto`` picks per vehicle).
+    settings
+        The search's time limit and seed.
+    """
+    from urpt_gcs.solvers import choose, prepare, solve
+
+    started = time.perf_counter()
+    deadline = started + settings.time_limit_s
+    pieces, naive_times, cut = naive_split(vehicles, single_order, reference)
+    # The tour is a cycle: it is cut open at a few other stops too; the search descends from
+    # the best few cuts in turn and goes on from the best it reaches.
+    order = list(single_order)
+    cuts = [(max(naive_times), pieces, cut)]
+    for r in _ROTATIONS if len(vehicles) > 1 else ():
+        if time.perf_counter() - started > _ROTATION_SHARE * settings.time_limit_s:
+            break
+        shift = int(r * len(order))
+        if shift == 0:
+            continue
+        try:
+            tried = naive_split(vehicles, order[shift:] + order[:shift], reference)
+        except SettingsError:
+            continue  # no cut from there fits every endurance
+        cuts.append((max(tried[1]), tried[0], tried[2]))
+    cuts.sort(key=lambda c: c[0])
+    by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
+    resolves = 0
+
+    def resolve(k: int, targets: list[int], budget_s: float) -> list[int]:
+        nonlocal resolves
+        resolves += 1
+        sub, kept = restrict(vehicles[k].instance, targets)
+        name = choose(sub, solver)
+        prepare(name)
+        tour = solve(sub, name, SolveSettings(time_limit_s=budget_s, seed=settings.seed))
+        if any(v < 0 for v in tour.order):
+            raise SettingsError(
+                f"--solver {solver} places its own stops, which a fleet cannot share out: "
+                "use --solver auto, exact, heuristic or ortools"
+            )
+        return [int(kept[v]) for v in tour.order]
+
+    budget = max(0.05, min(_RESOLVE_S, settings.time_limit_s / (4 * len(vehicles))))
+
+    def begin(pieces: list[list[int]], cut: list[list[int]]) -> list[_Route]:
+        routes = []
+        for k, vehicle in enumerate(vehicles):
+            route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [])
+            # The piece as cut, on the vehicle's own viewpoints, if that is quicker: the
+            # solvers shorten the length, not the time with its stops, and have little time.
+            if cut[k]:
+                as_cut = _Route(vehicle, _carried(vehicle, cut[k], reference, by_target[k]))
+                if as_cut.time_s < route.time_s:
+                    route = as_cut
+            routes.append(route)
+        return routes
+
+    def descend(routes: list[_Route], until: float, long_round: bool) -> tuple[int, bool]:
+        """Moves and re-solves, longest flight first, until neither helps (or ``until``);
+        a long round instead shares the time left out over one re-solve of each."""
+        moves, improved_any = 0, False
+        while time.perf_counter() < until:
+            moved = 0 if long_round else _move_stops(routes, by_target, until)
+            moves += moved
+            improved = False
+            turn = sorted(range(len(routes)), key=lambda k: -routes[k].time_s)
+            for n, k in enumerate(turn):
+                left = until - time.perf_counter()
+                if left <= 0.0:
+                    break
+                mine = _own_targets(routes, k)
+                if not mine:
+                    continue
+                spend = max(budget, left / (len(turn) - n)) if long_round else budget
+                found = resolve(k, mine, spend)
+                t = routes[k].vehicle.time_s(routes[k].points[found])
+                if t < routes[k].time_s - _EPS_S:
+                    routes[k].order, routes[k].time_s = found, t
+                    improved = True
+            improved_any |= improved or moved > 0
+            if long_round or not (improved or moved):
+                break
+        return moves, improved_any
+
+    starts = cuts[:_STARTS]
+    short_until = started + _STARTS_SHARE * settings.time_limit_s
+    routes: list[_Route] = []
+    start_times: tuple[float, ...] = ()
+    moves = 0
+    for n, (_, pieces_n, cut_n) in enumerate(starts):
+        now = time.perf_counter()
+        if n > 0 and now >= short_until:
+            break
+        trial = begin(pieces_n, cut_n)
+        if n == 0:
+            start_times = tuple(r.time_s for r in trial)
+        until = now + max(short_until - now, 0.0) / (len(starts) - n)
+        moved, _ = descend(trial, max(until, now + budget), long_round=False)
+        moves += moved
+        if not routes or max(r.time_s for r in trial) < max(r.time_s for r in routes):
+            routes = trial
+    # The time left: a long round of re-solves, then moves again while they help.
+    while time.perf_counter() < deadline:
+        _, improved = descend(routes, deadline, long_round=True)
+        if not improved:
+            break
+        moved, _ = descend(routes, deadline, long_round=False)
+        moves += moved
+    owners = _owners(routes)
+    return FleetTours(
+        orders=tuple(tuple(r.order) for r in routes),
+        targets=tuple(
+            tuple(int(t) for t in np.flatnonzero(owners == k)) for k in range(len(routes))
+        ),
+        times_s=tuple(r.time_s for r in routes),
+        naive_times_s=tuple(naive_times),
+        start_times_s=start_times,
+        moves=moves,
+        resolves=resolves,
+        search_s=time.perf_counter() - started,
+    )
+
+
+def _carried(
+    vehicle: Vehicle, stops: list[int], reference: Instance, near: list[IntArray]
+) -> list[int]:
+    """Stops of ``reference`` in flight order carried onto the vehicle's own viewpoints:
+    for each target a stop sees that the route does not yet, the vehicle's viewpoint of that
+    target nearest the stop (the stops themselves where the instances are the same)."""
+    if vehicle.instance.points_xy is reference.points_xy:
+        return list(stops)
+    inst = vehicle.instance
+    assert inst.points_xy is not None and reference.points_xy is not None
+    covers = reference.covers
+    order: list[int] = []
+    have = np.zeros(inst.n_targets, dtype=bool)
+    for stop in stops:
+        at = reference.points_xy[stop]
+        for t in covers.target[covers.ptr[stop] : covers.ptr[stop + 1]].tolist():
+            if have[t]:
+                continue
+            options = near[t]
+            d = np.hypot(*(inst.points_xy[options] - at).T)
+            v = int(options[int(np.argmin(d))])
+            order.append(v)
+            have |= inst.covers.seen([v])
+    return order
+
+
+def _owners(routes: list[_Route]) -> IntArray:
+    """Which vehicle each target is counted for: the first whose stops see it, except that
+    a vehicle left with none takes one it sees from a vehicle that has several."""
+    seen = np.vstack([r.seen() for r in routes])
+    if not seen.any(axis=0).all():
+        raise PlanError("internal check failed: the fleet's tours miss a target; report this")
+    owners: IntArray = np.argmax(seen, axis=0).astype(np.int64)
+    for k in range(len(routes)):
+        counts = np.bincount(owners, minlength=len(routes))
+        if counts[k] == 0:
+            spare = np.flatnonzero(seen[k] & (counts[owners] > 1))
+            if spare.size:
+                owners[spare[0]] = k
+    return owners
+
+
+def _own_targets(routes: list[_Route], k: int) -> list[int]:
+    return [int(t) for t in np.flatnonzero(_owners(routes) == k)]
+
+
+# Stops of another vehicle nearest a stop of the last to land, tried for a swap with it.
+_SWAP_NEAREST = 6
+
+
+def _lost(route: _Route, stop: int, rest: list[int], elsewhere: npt.NDArray[np.bool_]) -> list[int]:
+    """The targets ``stop`` sees that neither ``rest`` nor ``elsewhere`` does."""
+    covers = route.vehicle.instance.covers
+    left = covers.seen(rest) | elsewhere
+    return [int(t) for t in covers.target[covers.ptr[stop] : covers.ptr[stop + 1]] if not left[t]]
+
+
+def _taking(route: _Route, order: list[int], targets: list[int], near: list[IntArray]) -> list[int]:
+    """``order`` with a viewpoint inserted, at least added distance, for each target it does
+    not see yet."""
+    covers = route.vehicle.instance.covers
+    have = covers.seen(order)
+    for t in targets:
+        if not have[t]:
+            order = _insert(route, order, near[t])
+            have = covers.seen(order)
+    return order
+
+
+def _seen_except(routes: list[_Route], skip: set[int]) -> npt.NDArray[np.bool_]:
+    out = np.zeros(routes[0].vehicle.instance.n_targets, dtype=bool)
+    for k, r in enumerate(routes):
+        if k not in skip:
+            out |= r.seen()
+    return out
+
+
+def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline: float) -> int:
+    """Move a stop off the vehicle that lands last, or swap one of its stops with a nearby
+    stop of another vehicle, while that shortens it without making the other's flight as
+    long; the number of moves made. A vehicle keeps at least one stop."""
+    moves = 0
+    while time.perf_counter() < deadline:
+        c = int(np.argmax([r.time_s for r in routes]))
+        worst, critical = routes[c].time_s, routes[c]
+        best: tuple[float, int, list[int], list[int]] | None = None
+        for i, stop in enumerate(critical.order):
+            rest = critical.order[:i] + critical.order[i + 1 :]
+            rest_s = critical.vehicle.time_s(critical.points[rest]) if rest else 0.0
+            if not rest or rest_s >= worst - _EPS_S:
+                continue
+            lost = _lost(critical, stop, rest, _seen_except(routes, {c}))
+            for j, other in enumerate(routes):
+                if j == c:
+                    continue
+                order = _taking(other, list(other.order), lost, by_target[j])
+                value = max(rest_s, other.vehicle.time_s(other.points[order]))
+                if value < worst - _EPS_S and (best is None or value < best[0]):
+                    best = (value, j, rest, order)
+        if best is None:
+            best = _best_swap(routes, c, by_target, deadline)
+        if best is None:
+            return moves
+        _, j, mine, theirs = best
+        for k, order in ((c, mine), (j, theirs)):
+            routes[k].order = order
+            routes[k].time_s = routes[k].vehicle.time_s(routes[k].points[order])
+        moves += 1
+    return moves
+
+
+def _best_swap(
+    routes: list[_Route], c: int, by_target: list[list[IntArray]], deadline: float
+) -> tuple[float, int, list[int], list[int]] | None:
+    """The best swap of a stop of vehicle ``c`` with one of the nearest stops of another
+    vehicle that shortens ``c`` without making the other as long, or None."""
+    critical = routes[c]
+    worst = critical.time_s
+    best: tuple[float, int, list[int], list[int]] | None = None
+    for j, other in enumerate(routes):
+        if j == c or not other.order:
+            continue
+        elsewhere = _seen_except(routes, {c, j})
+        theirs_xy = other.points[other.order]
+        for i, stop in enumerate(critical.order):
+            if time.perf_counter() >= deadline:
+                return best
+            mine_rest = critical.order[:i] + critical.order[i + 1 :]
+            d = np.hypot(*(theirs_xy - critical.points[stop]).T)
+            for u_pos in np.argsort(d)[:_SWAP_NEAREST].tolist():
+                u = other.order[u_pos]
+                their_rest = other.order[:u_pos] + other.order[u_pos + 1 :]
+                lost_mine = _lost(
+                    critical,
+                    stop,
+                    mine_rest,
+                    elsewhere | other.vehicle.instance.covers.seen(their_rest),
+                )
+                lost_theirs = _lost(
+                    other,
+                    u,
+                    their_rest,
+                    elsewhere | critical.vehicle.instance.covers.seen(mine_rest),
+                )
+                mine = _taking(critical, mine_rest, lost_theirs, by_target[c])
+                if not mine:
+                    continue
+                mine_s = critical.vehicle.time_s(critical.points[mine])
+                if mine_s >= worst - _EPS_S:
+                    continue
+                theirs = _taking(other, their_rest, lost_mine, by_target[j])
+                if not theirs:
+                    continue
+                value = max(mine_s, other.vehicle.time_s(other.points[theirs]))
+                if value < worst - _EPS_S and (best is None or value < best[0]):
+                    best = (value, j, mine, theirs)
+    return best
