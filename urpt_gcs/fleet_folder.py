@@ -39,6 +39,9 @@ class FleetVehicle:
         The names of the targets it was planned to photograph.
     flight_time_s
         Its planned flight time, if the summary states it.
+    start_delay_s
+        How long after the fleet's common start it takes off (the plan keeps vehicles that
+        share a home or cross paths apart by these delays).
     """
 
     number: int
@@ -47,6 +50,7 @@ class FleetVehicle:
     altitude_m: float
     targets: tuple[str, ...]
     flight_time_s: float | None = None
+    start_delay_s: float = 0.0
 
     @property
     def name(self) -> str:
@@ -145,7 +149,13 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
         )
     planned = row.get("flight_time_s")
     flight_s = None if planned is None else _number(planned, f"{where}: vehicle {number}'s time")
-    return FleetVehicle(number, sub, missions, altitude, tuple(targets), flight_s)
+    delay_s = _number(row.get("start_delay_s", 0.0), f"{where}: vehicle {number}'s start delay")
+    if delay_s < 0.0:
+        raise MissionFileError(
+            f"{where}: vehicle {number}'s start delay {delay_s:g} s is negative: plan the "
+            "fleet again"
+        )
+    return FleetVehicle(number, sub, missions, altitude, tuple(targets), flight_s, delay_s)
 
 
 def _missions(folder: Path) -> tuple[Path, ...]:

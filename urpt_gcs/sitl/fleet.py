@@ -105,9 +105,13 @@ def required_separation_m(separation: Separation) -> float:
 
 
 def fly_fleet(
-    missions: Sequence[Mission], settings: ReplaySettings, progress: Progress | None = None
+    missions: Sequence[Mission],
+    settings: ReplaySettings,
+    progress: Progress | None = None,
+    start_delays_s: Sequence[float] | None = None,
 ) -> list[Flight]:
-    """Fly every mission at once, one vehicle each, in mission order.
+    """Fly every mission at once, one vehicle each, in mission order; vehicle ``k`` arms
+    ``start_delays_s[k]`` simulated seconds after the common start (all at once if None).
 
     Raises
     ------
@@ -134,7 +138,8 @@ def fly_fleet(
         places: list[tuple[str, str]] = []
         for number, mission in enumerate(missions, start=1):
             places.append(_start_vehicle(running, number, mission, settings, say))
-        return asyncio.run(_fly_all(places, missions, settings, timeout_s, say))
+        delays = list(start_delays_s) if start_delays_s is not None else [0.0] * len(missions)
+        return asyncio.run(_fly_all(places, missions, settings, timeout_s, say, delays))
 
 
 def _start_vehicle(
@@ -179,6 +184,7 @@ async def _fly_all(
     settings: ReplaySettings,
     timeout_s: float,
     say: Progress,
+    delays_s: Sequence[float],
 ) -> list[Flight]:
     from urpt_gcs.mavsdk_link import connect
 
@@ -186,10 +192,19 @@ async def _fly_all(
 
     async def one(number: int, url: str, where: str, mission: Mission) -> Flight:
         prefix = f"vehicle {number}: "
+        delay_s = delays_s[number - 1]
+
         try:
             async with connect(url, CONNECT_TIMEOUT_S) as link:
                 return await _fly(
-                    link, mission, settings, timeout_s, lambda m: say(prefix + m), where, gate.wait
+                    link,
+                    mission,
+                    settings,
+                    timeout_s + delay_s / settings.speedup,
+                    lambda m: say(prefix + m),
+                    where,
+                    gate.wait,
+                    delay_s,
                 )
         except LinkError as exc:
             raise LinkError(f"vehicle {number}: {exc}") from None
@@ -368,7 +383,8 @@ def replay_fleet(
         for v, m in zip(fleet.vehicles, missions, strict=True)
     ]
     started = time.monotonic()
-    flights = fly_fleet(missions, settings, progress)
+    delays = [v.start_delay_s for v in fleet.vehicles]
+    flights = fly_fleet(missions, settings, progress, delays)
     wall_s = time.monotonic() - started
     reports: list[ReplayReport] = [
         judge(flight, mission, dem_path, targets_path, exp, f"{v.name} ({v.missions[0]})")

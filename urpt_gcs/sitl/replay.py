@@ -437,9 +437,11 @@ async def _fly(
     say: Progress,
     where: str,
     before_arming: Callable[[], Awaitable[None]] | None = None,
+    start_delay_s: float = 0.0,
 ) -> Flight:
     """Upload, arm and fly; ``before_arming``, if given, is awaited once the vehicle is
-    ready to arm (a fleet's vehicles wait there for each other)."""
+    ready to arm (a fleet's vehicles wait there for each other), and the vehicle then waits
+    ``start_delay_s`` more on its own clock before it arms."""
     upload = await upload_verified(link, mission, UploadSettings(), say)
     vehicle = await identify(link, where)
     param, telemetry, action = (
@@ -455,7 +457,9 @@ async def _fly(
         if mission.firmware == "px4":
             await _start_px4(link, system_id, param, action, mission, say, before_arming)
         else:
-            await _start_ardupilot(link, param, action, watch, settings, say, before_arming)
+            await _start_ardupilot(
+                link, param, action, watch, settings, say, before_arming, start_delay_s
+            )
         await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
     except asyncio.TimeoutError:
         raise LinkError(
@@ -484,8 +488,10 @@ async def _start_ardupilot(
     settings: ReplaySettings,
     say: Progress,
     before_arming: Callable[[], Awaitable[None]] | None = None,
+    start_delay_s: float = 0.0,
 ) -> None:
-    """Arm in GUIDED and start AUTO, taking off as ``settings.takeoff`` says."""
+    """Arm in GUIDED and start AUTO, taking off as ``settings.takeoff`` says; with
+    ``before_arming``, arm ``start_delay_s`` after it returns, timed on the vehicle's clock."""
     if settings.takeoff == "auto-options":
         await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
     retry_s = ARM_RETRY_S
@@ -496,6 +502,9 @@ async def _start_ardupilot(
             await _set_mode(link, ARMING_MODE)
         await _until_armable(link, watch, ARM_WAIT_S)
         await before_arming()
+        if start_delay_s > 0.0:
+            say(f"waiting {start_delay_s:g} s on the vehicle's clock, as planned")
+            await _wait_on_vehicle_clock(watch, start_delay_s, settings.speedup)
         retry_s = ARM_RETRY_TOGETHER_S
     say("arming")
     await _arm_when_ready(link, action, watch, ARM_WAIT_S, retry_s, say)
@@ -506,6 +515,18 @@ async def _start_ardupilot(
             await asyncio.sleep(0.05)
     say("flying the mission in AUTO")
     await link.mission.start_mission()
+
+
+async def _wait_on_vehicle_clock(watch: _Watch, seconds: float, speedup: float) -> None:
+    """Until the vehicle's own clock (``time_boot_ms`` of its positions) has moved on by
+    ``seconds``: a simulator slower than its speed-up still waits the planned time. With no
+    position heard yet, the wall-clock time at the nominal speed-up is waited first."""
+    if not watch.track:
+        await asyncio.sleep(seconds / speedup)
+        return
+    start = watch.track[-1].time_s
+    while watch.track[-1].time_s - start < seconds:
+        await asyncio.sleep(0.01)
 
 
 async def _start_px4(
