@@ -1,0 +1,280 @@
+"""Refinement on the terrain: with the order fixed, move every stop to shorten the tour.
+
+The solver's stops are candidate viewpoints: boundary samples of the visibility regions. The
+shortest flight enters the regions anywhere, so each stop is moved, in turn, within the
+region of everything it must see (the intersection of those targets' true regions), to
+shorten its two legs. A move is kept only when it shortens the tour and, checked exactly on
+the DEM's bilinear surface, the stop still sees every target it is counted for from all of
+the ring of ``tolerance_m`` around it (the camera cone, or the frame at the stop's heading),
+its position as the mission writes it still sees them, and both new legs clear the terrain
+by ``min_clearance_m`` over known ground. The result is never longer than the tour given.
+
+The search is a pattern search per stop: towards the straight line between its neighbours
+(where the two legs are shortest), and around it at a step that halves when nothing around
+helps. Stops that are not neighbours move together, so every check of a sweep is one call.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from urpt_gcs.gtsp import cover_sets
+from urpt_gcs.margin import RING_POINTS
+from urpt_gcs.segments import segment_profile
+from urpt_gcs.solvers import Tour
+from urpt_gcs.terrain import FloatArray, Terrain
+from urpt_gcs.visibility import BoolArray, Camera, line_of_sight
+
+# Fractions of the way to the line between the neighbours, tried each sweep.
+_TOWARDS = (1.0, 0.5, 0.25, 0.125, 0.0625)
+# Directions of the pattern around a stop.
+_DIRECTIONS = 12
+# The pattern's first step, as a share of the stop's smallest cone radius, and its last.
+_FIRST_STEP = 0.25
+_LAST_STEP_M = 0.01
+# A move must gain at least this much (metres) to count.
+_MIN_GAIN_M = 1e-6
+
+Written = Callable[[FloatArray], FloatArray]
+Fill = Callable[[FloatArray, FloatArray], object]
+
+
+@dataclass(frozen=True, slots=True)
+class Refinement:
+    """How refinement changed the tour: its length before and after, moves and sweeps."""
+
+    before_m: float
+    after_m: float
+    moves: int
+    sweeps: int
+    seconds: float
+
+    @property
+    def shortened_pct(self) -> float:
+        if self.before_m <= 0.0:
+            return 0.0
+        return 100.0 * (self.before_m - self.after_m) / self.before_m
+
+
+@dataclass(frozen=True, slots=True)
+class Site:
+    """What a move is checked against: the terrain, the targets and the camera."""
+
+    terrain: Terrain
+    targets_xy: FloatArray
+    ground_m: FloatArray
+    camera: Camera
+    tolerance_m: float = 0.0
+    min_clearance_m: float = 0.0
+    # The position the mission writes for a point (the 1e-7 degree grid); None: as is.
+    written: Written | None = None
+    # Reads the terrain along legs where a sparse mosaic holds none yet.
+    fill: Fill | None = None
+    workers: int | None = 1
+
+
+def _closed_length(points: FloatArray, depot: FloatArray | None) -> float:
+    path = points if depot is None else np.vstack([depot, points, depot])
+    if depot is None and len(points) > 1:
+        path = np.vstack([points, points[:1]])
+    return float(np.hypot(*np.diff(path, axis=0).T).sum()) if len(path) > 1 else 0.0
+
+
+def _neighbours(
+    points: FloatArray, k: np.ndarray, depot: FloatArray | None
+) -> tuple[FloatArray, FloatArray]:
+    n = len(points)
+    prev = points[(k - 1) % n].copy()
+    nxt = points[(k + 1) % n].copy()
+    if depot is not None:
+        prev[k == 0] = depot
+        nxt[k == n - 1] = depot
+    return prev, nxt
+
+
+def _toward_line(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    """The point of segment ``a b`` nearest to each ``p``."""
+    d = b - a
+    ll = np.einsum("ij,ij->i", d, d)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(ll > 0.0, np.einsum("ij,ij->i", p - a, d) / ll, 0.0)
+    out: FloatArray = a + np.clip(t, 0.0, 1.0)[:, None] * d
+    return out
+
+
+def _feasible(
+    site: Site,
+    cand: FloatArray,
+    sees: BoolArray,
+    heading: FloatArray | None,
+    a: FloatArray,
+    b: FloatArray,
+) -> BoolArray:
+    """Which candidate stops (each with its row of targets to see, its heading and its
+    neighbours ``a``, ``b``) pass every check of a move."""
+    n = len(cand)
+    ok = np.ones(n, dtype=bool)
+    cam = site.camera
+    # Legs first: they are the cheapest to refuse.
+    if site.fill is not None:
+        site.fill(np.vstack([a, cand]), np.vstack([cand, b]))
+    h = np.full(2 * n, cam.altitude_m)
+    start = np.column_stack([np.vstack([a, cand]), h])
+    end = np.column_stack([np.vstack([cand, b]), h])
+    prof = segment_profile(site.terrain, start, end, site.workers)
+    legs_ok = (prof.unknown_fraction == 0.0) & (prof.excess_m <= -site.min_clearance_m)
+    ok &= legs_ok[:n] & legs_ok[n:]
+    # Every target from the ring around the candidate (and from the candidate itself).
+    angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
+    offsets = np.vstack(
+        [[0.0, 0.0], site.tolerance_m * np.column_stack([np.cos(angles), np.sin(angles)])]
+    )
+    if site.tolerance_m <= 0.0:
+        offsets = offsets[:1]
+    stop, target = np.nonzero(sees & ok[:, None])
+    eye = (cand[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+    pair_stop = np.repeat(stop, len(offsets))
+    pair_target = np.repeat(target, len(offsets))
+    at = None if heading is None else np.repeat(heading[stop], len(offsets))
+    if site.written is not None:
+        # The position as written, seen from exactly there.
+        eye = np.vstack([eye, site.written(cand[stop])])
+        pair_stop = np.concatenate([pair_stop, stop])
+        pair_target = np.concatenate([pair_target, target])
+        at = None if at is None or heading is None else np.concatenate([at, heading[stop]])
+    tx, tg = site.targets_xy[pair_target], site.ground_m[pair_target]
+    seen = cam.in_view(eye, tx, tg, at)
+    e3 = np.column_stack([eye[seen], np.full(int(seen.sum()), cam.altitude_m)])
+    t3 = np.column_stack([tx[seen], tg[seen]])
+    seen[seen] = line_of_sight(site.terrain, e3, t3, site.workers)
+    failed = np.zeros(n, dtype=bool)
+    failed[pair_stop[~seen]] = True
+    ok &= ~failed
+    return ok
+
+
+def refine_tour(
+    site: Site,
+    tour: Tour,
+    depot_xy: tuple[float, float] | None,
+    time_limit_s: float,
+) -> tuple[Tour, Refinement]:
+    """The tour with its stops moved to shorten it, every move checked on the terrain.
+
+    Parameters
+    ----------
+    site
+        Terrain, targets, camera and the checks' margins.
+    tour
+        The tour to refine; ``tour.sees`` says what each stop must keep seeing.
+    depot_xy
+        Home, where the tour starts and ends (None: a closed cycle).
+    time_limit_s
+        Seconds the search may take; every sweep started is finished.
+
+    Returns
+    -------
+    tuple
+        The refined tour (never longer) and what refinement did.
+    """
+    started = time.perf_counter()
+    if tour.points_xy is None or len(tour.points_xy) == 0:
+        length = tour.length
+        return tour, Refinement(length, length, 0, 0, 0.0)
+    pts = np.array(tour.points_xy, dtype=np.float64)
+    n = len(pts)
+    depot = None if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
+    before = _closed_length(pts, depot)
+    heading = None if tour.headings_deg is None else np.asarray(tour.headings_deg, np.float64)
+    cone = site.camera.least_half_width_m(site.ground_m)
+    smallest = np.array([cone[row].min() if row.any() else 0.0 for row in tour.sees])
+    step = _FIRST_STEP * smallest
+    # Stops moved together are never neighbours: alternate ones, and the last on its own
+    # when a closed cycle has an odd number.
+    colour = np.arange(n) % 2
+    if depot is None and n % 2 == 1 and n > 1:
+        colour[-1] = 2
+    groups = [np.flatnonzero(colour == c) for c in range(3) if (colour == c).any()]
+    if depot is None and n <= 2:
+        groups = [np.array([k]) for k in range(n)]
+    theta = np.arange(_DIRECTIONS) * (2.0 * math.pi / _DIRECTIONS)
+    ring = np.column_stack([np.cos(theta), np.sin(theta)])
+    moves = sweeps = 0
+    while time.perf_counter() - started < time_limit_s:
+        sweeps += 1
+        gained = 0.0
+        for k in groups:
+            k = k[step[k] >= _LAST_STEP_M]
+            if k.size == 0:
+                continue
+            a, b = _neighbours(pts, k, depot)
+            p = pts[k]
+            q = _toward_line(p, a, b)
+            tries = [p + f * (q - p) for f in _TOWARDS]
+            tries += [p + step[k][:, None] * d for d in ring]
+            cand = np.stack(tries, axis=1)  # (stops, tries, 2)
+            old = np.hypot(*(p - a).T) + np.hypot(*(p - b).T)
+            new = np.hypot(*(cand - a[:, None]).transpose(2, 0, 1)) + np.hypot(
+                *(cand - b[:, None]).transpose(2, 0, 1)
+            )
+            better = new < old[:, None] - _MIN_GAIN_M
+            si, ti = np.nonzero(better)
+            ok = np.zeros(better.shape, dtype=bool)
+            if si.size:
+                ok[si, ti] = _feasible(
+                    site,
+                    cand[si, ti],
+                    tour.sees[k[si]],
+                    None if heading is None else heading[k[si]],
+                    a[si],
+                    b[si],
+                )
+            value = np.where(ok, new, np.inf)
+            pick = value.argmin(axis=1)
+            moved = np.isfinite(value[np.arange(k.size), pick])
+            for j in np.flatnonzero(moved):
+                pts[k[j]] = cand[j, pick[j]]
+                gained += float(old[j] - value[j, pick[j]])
+            moves += int(moved.sum())
+            # Nothing around helped: look closer next time.
+            step[k[~moved]] *= 0.5
+        if gained <= 1e-9 * max(before, 1.0) and bool(np.all(step < _LAST_STEP_M)):
+            break
+    after = _closed_length(pts, depot)
+    if after >= before or moves == 0:
+        return tour, Refinement(before, before, 0, sweeps, time.perf_counter() - started)
+    refined = dataclasses.replace(
+        tour,
+        order=tuple(
+            -1 if not np.array_equal(pts[i], tour.points_xy[i]) else v
+            for i, v in enumerate(tour.order)
+        ),
+        points_xy=pts,
+        length=after,
+        lower_bound=min(tour.lower_bound, after),
+        notes=(*tour.notes, f"stops moved within their regions: {before:.1f} m -> {after:.1f} m"),
+    )
+    return refined, Refinement(before, after, moves, sweeps, time.perf_counter() - started)
+
+
+def written_grid(
+    to_latlon: Callable[[FloatArray], FloatArray],
+    to_xy: Callable[[FloatArray], FloatArray],
+    step_deg: float = 1e-7,
+) -> Written:
+    """The position a mission writes for each point: lat/lon rounded to ``step_deg``."""
+
+    def written(xy: FloatArray) -> FloatArray:
+        ll = to_latlon(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        return to_xy(np.round(ll / step_deg) * step_deg)
+
+    return written
+
+
+__all__ = ["Refinement", "Site", "cover_sets", "refine_tour", "written_grid"]
