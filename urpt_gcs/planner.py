@@ -220,6 +220,9 @@ class Plan:
     refinement: Refinement | None = None
     # The certified lower bound of every flight that photographs every target.
     certificate: Certificate | None = None
+    # The solver's claim for its tour (before any stop moved): no tour over the candidate
+    # viewpoints is shorter.
+    optimal_over_candidates: bool = False
 
     @property
     def lower_bound_m(self) -> float:
@@ -506,6 +509,7 @@ def plan(
     stages.lap("compile")
     stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
     tour = solve(instance, solver, settings.solve)
+    over_candidates = tour.proven_optimal
     stages.lap("solve")
     stages.say(f"stops seeing from anywhere within {settings.position_tolerance_m:g} m")
     tour, margin_warnings = robust_tour(
@@ -572,6 +576,7 @@ def plan(
         sortie_order=sortie_order,
         refinement=refinement,
         certificate=certificate,
+        optimal_over_candidates=over_candidates,
     )
 
 

@@ -126,7 +126,7 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "proven_optimal": plan.proven_optimal,
         "proven_gap_pct": 100.0 * PROVEN_GAP,
         # The solver's own claim: no tour over the candidate viewpoints is shorter.
-        "optimal_over_candidates": tour.proven_optimal,
+        "optimal_over_candidates": plan.optimal_over_candidates,
         **_refinement(plan),
         "bound": _bound(plan),
         "solver_tour_length_m": round(
