@@ -24,7 +24,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from urpt_gcs.gtsp import cover_sets
 from urpt_gcs.margin import RING_POINTS
 from urpt_gcs.segments import segment_profile
 from urpt_gcs.solvers import Tour
@@ -38,6 +37,9 @@ _DIRECTIONS = 12
 # The pattern's first step, as a share of the stop's smallest cone radius, and its last.
 _FIRST_STEP = 0.25
 _LAST_STEP_M = 0.01
+# Sweeps at most (a sweep that moves nothing halves every step, so this is never reached
+# on a tour of sane size).
+_MAX_SWEEPS = 400
 # A move must gain at least this much (metres) to count.
 _MIN_GAIN_M = 1e-6
 
@@ -187,13 +189,16 @@ def refine_tour(
     if tour.points_xy is None or len(tour.points_xy) == 0:
         length = tour.length
         return tour, Refinement(length, length, 0, 0, 0.0)
-    pts = np.array(tour.points_xy, dtype=np.float64)
-    n = len(pts)
     depot = None if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
-    before = _closed_length(pts, depot)
+    before = _closed_length(np.asarray(tour.points_xy, dtype=np.float64), depot)
+    keep, sees = _thin(site, tour, depot)
+    pts = np.array(tour.points_xy[keep], dtype=np.float64)
+    n = len(pts)
     heading = None if tour.headings_deg is None else np.asarray(tour.headings_deg, np.float64)
+    if heading is not None:
+        heading = heading[keep]
     cone = site.camera.least_half_width_m(site.ground_m)
-    smallest = np.array([cone[row].min() if row.any() else 0.0 for row in tour.sees])
+    smallest = np.array([cone[row].min() if row.any() else 0.0 for row in sees])
     step = _FIRST_STEP * smallest
     # Stops moved together are never neighbours: alternate ones, and the last on its own
     # when a closed cycle has an odd number.
@@ -206,7 +211,7 @@ def refine_tour(
     theta = np.arange(_DIRECTIONS) * (2.0 * math.pi / _DIRECTIONS)
     ring = np.column_stack([np.cos(theta), np.sin(theta)])
     moves = sweeps = 0
-    while time.perf_counter() - started < time_limit_s:
+    while sweeps < _MAX_SWEEPS and time.perf_counter() - started < time_limit_s:
         sweeps += 1
         gained = 0.0
         for k in groups:
@@ -230,7 +235,7 @@ def refine_tour(
                 ok[si, ti] = _feasible(
                     site,
                     cand[si, ti],
-                    tour.sees[k[si]],
+                    sees[k[si]],
                     None if heading is None else heading[k[si]],
                     a[si],
                     b[si],
@@ -247,20 +252,56 @@ def refine_tour(
         if gained <= 1e-9 * max(before, 1.0) and bool(np.all(step < _LAST_STEP_M)):
             break
     after = _closed_length(pts, depot)
-    if after >= before or moves == 0:
+    if after >= before:
         return tour, Refinement(before, before, 0, sweeps, time.perf_counter() - started)
+    old_xy = tour.points_xy[keep]
     refined = dataclasses.replace(
         tour,
         order=tuple(
-            -1 if not np.array_equal(pts[i], tour.points_xy[i]) else v
-            for i, v in enumerate(tour.order)
+            v if np.array_equal(pts[i], old_xy[i]) else -1
+            for i, v in enumerate(np.asarray(tour.order)[keep].tolist())
         ),
         points_xy=pts,
+        sees=sees,
+        headings_deg=heading,
         length=after,
         lower_bound=min(tour.lower_bound, after),
         notes=(*tour.notes, f"stops moved within their regions: {before:.1f} m -> {after:.1f} m"),
     )
     return refined, Refinement(before, after, moves, sweeps, time.perf_counter() - started)
+
+
+def _thin(site: Site, tour: Tour, depot: FloatArray | None) -> tuple[np.ndarray, BoolArray]:
+    """Which stops to keep and what each must see: a target counted at several stops only at
+    the first, and a stop left with nothing to see dropped where the leg that skips it clears
+    the terrain (never longer, by the triangle inequality). Fewer targets per stop leave
+    more room to move."""
+    assert tour.points_xy is not None
+    counted = tour.sees.any(axis=0)
+    first = np.argmax(tour.sees, axis=0)
+    sees = np.zeros_like(tour.sees, dtype=bool)
+    sees[first[counted], np.flatnonzero(counted)] = True
+    keep = np.ones(len(sees), dtype=bool)
+    pts = np.asarray(tour.points_xy, dtype=np.float64)
+    h = site.camera.altitude_m
+    for k in np.flatnonzero(~sees.any(axis=1)).tolist():
+        kept = np.flatnonzero(keep)
+        j = int(np.searchsorted(kept, k))
+        earlier, later = kept[:j], kept[j + 1 :]
+        if depot is not None:
+            a = pts[earlier[-1]] if earlier.size else depot
+            b = pts[later[0]] if later.size else depot
+        else:
+            rest = np.concatenate([later, earlier])
+            if rest.size < 2:
+                continue
+            a, b = pts[rest[-1]], pts[rest[0]]
+        if site.fill is not None:
+            site.fill(a[None, :], b[None, :])
+        prof = segment_profile(site.terrain, [[a[0], a[1], h]], [[b[0], b[1], h]], site.workers)
+        if prof.unknown_fraction[0] == 0.0 and prof.excess_m[0] <= -site.min_clearance_m:
+            keep[k] = False
+    return np.flatnonzero(keep), sees[keep]
 
 
 def written_grid(
@@ -277,4 +318,4 @@ def written_grid(
     return written
 
 
-__all__ = ["Refinement", "Site", "cover_sets", "refine_tour", "written_grid"]
+__all__ = ["Refinement", "Site", "refine_tour", "written_grid"]
