@@ -27,6 +27,12 @@ PROVEN_GAP = 1e-4
 # Seconds the bound may spend by default, and its share of the solver's time limit.
 BOUND_TIME_S = 5.0
 BOUND_SHARE = 0.5
+# Regions the bound is computed over at most: beyond, the regions farthest apart (every
+# flight enters those too), since the relaxation's first round grows with their square.
+BOUND_MAX_REGIONS = 150
+# Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
+_FINE_UP_TO = 24
+_LEAST_SECTORS = 180
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,25 +67,56 @@ def bound_time_s(time_limit_s: float) -> float:
     return min(BOUND_TIME_S, BOUND_SHARE * time_limit_s)
 
 
+def spread_targets(
+    targets_xy: FloatArray, radius_m: FloatArray, depot_xy: tuple[float, float] | None, k: int
+) -> list[int]:
+    """``k`` targets whose discs of ``radius_m`` lie far apart (farthest-point order), from
+    the one farthest from the depot (or from target 0); all of them when there are no more."""
+    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    r = np.asarray(radius_m, dtype=np.float64)
+    if len(xy) <= k:
+        return list(range(len(xy)))
+    origin = xy[0] if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
+    gap = np.hypot(*(xy - origin).T) - r
+    chosen: list[int] = []
+    for _ in range(k):
+        j = int(np.argmax(gap))
+        chosen.append(j)
+        gap = np.minimum(gap, np.hypot(*(xy - xy[j]).T) - r - r[j])
+        gap[chosen] = -np.inf
+    return sorted(chosen)
+
+
+def star_sectors(regions: int) -> int:
+    """Sectors per outer star for a bound over ``regions`` regions."""
+    if regions <= _FINE_UP_TO:
+        return STAR_SECTORS
+    return max(_LEAST_SECTORS, STAR_SECTORS * _FINE_UP_TO // regions // 8 * 8)
+
+
 def outer_regions(
     terrain: Terrain,
     targets_xy: FloatArray,
     ground_m: FloatArray,
     camera: Camera,
     depot_xy: tuple[float, float] | None,
-    sectors: int = STAR_SECTORS,
     workers: int | None = 1,
+    max_regions: int = BOUND_MAX_REGIONS,
 ) -> tuple[RegionSet, float]:
-    """Every target's outer star as a region to enter, home as the depot, and the ratio of
-    the stars' area to what is certainly seen.
+    """The targets' outer stars as regions to enter (of at most ``max_regions`` targets far
+    apart), home as the depot, and the ratio of the stars' area to what is certainly seen.
 
     A target whose star holds home is marked as holding the depot (the bound leaves it out):
     a flight from home may see it without ever crossing its region's edge.
     """
-    outer, inner = star_reach(terrain, targets_xy, ground_m, camera, sectors, workers)
+    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    ground = np.asarray(ground_m, dtype=np.float64)
+    keep = spread_targets(xy, camera.cone_radius_m(ground), depot_xy, max_regions)
+    xy, ground = xy[keep], ground[keep]
+    sectors = star_sectors(len(keep))
+    outer, inner = star_reach(terrain, xy, ground, camera, sectors, workers)
     stars = tuple(
-        OuterStar((float(x), float(y)), outer[i], inner[i])
-        for i, (x, y) in enumerate(np.asarray(targets_xy, dtype=np.float64).tolist())
+        OuterStar((float(x), float(y)), outer[i], inner[i]) for i, (x, y) in enumerate(xy.tolist())
     )
     inside = None if depot_xy is None else tuple(_holds(s, depot_xy) for s in stars)
     regions = RegionSet(
