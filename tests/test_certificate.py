@@ -179,3 +179,50 @@ def test_optimal_over_candidates_is_not_called_proven_optimal(
     assert flight_quality(close).startswith("proven optimal")
     assert flight_quality(close, short=True) == "proven optimal"
     assert "proven" not in flight_quality(dict(data, optimal_over_candidates=True))
+
+
+@pytest.mark.parametrize(("terrain_seed", "m", "fov"), [(0, 4, 30.0), (1, 6, 20.0), (2, 5, 40.0)])
+def test_refined_stops_see_their_targets_on_paper_terrains(
+    terrain_seed: int, m: int, fov: float
+) -> None:
+    """Refinement of the exact tour on the paper's TIN terrains: never longer, and every
+    refined stop sees the targets it is counted for by a brute-force line of sight on the
+    raw raster (dense samples, scipy's interpolation)."""
+    from urpt_gcs.bench.paper import (
+        ALTITUDE,
+        CELL,
+        SIZE,
+        paper_instance,
+        random_targets,
+        tin_terrain,
+    )
+    from urpt_gcs.refinement import Site, refine_tour
+    from urpt_gcs.solvers import solve
+    from urpt_gcs.visibility import Camera
+
+    terrain = tin_terrain(terrain_seed)
+    targets = random_targets(terrain_seed, m)
+    exact = solve(paper_instance(terrain, targets, fov, 20), "exact")
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    camera = Camera(ALTITUDE, fov)
+    refined, done = refine_tour(Site(terrain, targets, ground, camera), exact, None, 30.0)
+    assert refined.length <= exact.length + 1e-9
+    assert done.after_m == pytest.approx(refined.length)
+    z = terrain.elevation_m
+    assert refined.points_xy is not None
+    pts = refined.points_xy
+    # The closed tour's length, measured here.
+    assert float(np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T).sum()) == pytest.approx(
+        refined.length
+    )
+    assert refined.sees.any(axis=0).all()
+    t = np.linspace(0.0, 1.0, 2000)[1:]
+    for k, row in enumerate(refined.sees):
+        for j in np.flatnonzero(row):
+            (tx, ty), (ex, ey) = targets[j], pts[k]
+            d = math.hypot(ex - tx, ey - ty)
+            assert d <= (ALTITUDE - ground[j]) * math.tan(math.radians(fov)) * (1 + 1e-9)
+            x, y = tx + t * (ex - tx), ty + t * (ey - ty)
+            col, row_ = x / CELL - 0.5, (SIZE - y) / CELL - 0.5
+            h = map_coordinates(z, [row_, col], order=1, mode="nearest", prefilter=False)
+            assert np.all(h <= ground[j] + t * (ALTITUDE - ground[j]) + 1e-6)

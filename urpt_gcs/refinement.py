@@ -6,8 +6,13 @@ region of everything it must see (the intersection of those targets' true region
 shorten its two legs. A move is kept only when it shortens the tour and, checked exactly on
 the DEM's bilinear surface, the stop still sees every target it is counted for from all of
 the ring of ``tolerance_m`` around it (the camera cone, or the frame at the stop's heading),
-its position as the mission writes it still sees them, and both new legs clear the terrain
-by ``min_clearance_m`` over known ground. The result is never longer than the tour given.
+its position as the mission writes it still sees them, and both new legs (and, with a
+depot, the leg straight home, which a flight cut into sorties may fly) clear the terrain by
+``min_clearance_m`` over known ground. The result is never longer than the tour given.
+
+First, a target counted at several stops is kept at the first of them only, and a stop left
+with nothing to see is dropped where the leg that skips it clears: fewer targets per stop
+leave it more room to move.
 
 The search is a pattern search per stop: towards the straight line between its neighbours
 (where the two legs are shortest), and around it at a step that halves when nothing around
@@ -117,21 +122,27 @@ def _feasible(
     heading: FloatArray | None,
     a: FloatArray,
     b: FloatArray,
+    depot: FloatArray | None,
 ) -> BoolArray:
     """Which candidate stops (each with its row of targets to see, its heading and its
-    neighbours ``a``, ``b``) pass every check of a move."""
+    neighbours ``a``, ``b``) pass every check of a move. With a depot the leg straight home
+    is checked too: a flight cut into sorties may fly it."""
     n = len(cand)
     ok = np.ones(n, dtype=bool)
     cam = site.camera
     # Legs first: they are the cheapest to refuse.
+    starts, ends = [a, cand], [cand, b]
+    if depot is not None:
+        starts.append(cand)
+        ends.append(np.tile(depot, (n, 1)))
     if site.fill is not None:
-        site.fill(np.vstack([a, cand]), np.vstack([cand, b]))
-    h = np.full(2 * n, cam.altitude_m)
-    start = np.column_stack([np.vstack([a, cand]), h])
-    end = np.column_stack([np.vstack([cand, b]), h])
+        site.fill(np.vstack(starts), np.vstack(ends))
+    h = np.full(len(starts) * n, cam.altitude_m)
+    start = np.column_stack([np.vstack(starts), h])
+    end = np.column_stack([np.vstack(ends), h])
     prof = segment_profile(site.terrain, start, end, site.workers)
     legs_ok = (prof.unknown_fraction == 0.0) & (prof.excess_m <= -site.min_clearance_m)
-    ok &= legs_ok[:n] & legs_ok[n:]
+    ok &= legs_ok.reshape(len(starts), n).all(axis=0)
     # Every target from the ring around the candidate (and from the candidate itself).
     angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
     offsets = np.vstack(
@@ -239,6 +250,7 @@ def refine_tour(
                     None if heading is None else heading[k[si]],
                     a[si],
                     b[si],
+                    depot,
                 )
             value = np.where(ok, new, np.inf)
             pick = value.argmin(axis=1)
