@@ -40,8 +40,9 @@ def run(name: str, dem: Path, targets: Path, settings: PlanSettings) -> None:
     )
     done, cert = result.refinement, result.certificate
     before = result.tour.length if done is None else done.before_m
+    after = result.tour.length if done is None else done.after_m
     print(
-        f"{'':36s} discrete {before:8.1f} m  refined {result.tour.length:8.1f} m "
+        f"{'':36s} discrete {before:8.1f} m  refined {after:8.1f} m "
         f"({0.0 if done is None else done.shortened_pct:5.2f} % shorter, "
         f"{t.get('refine', 0.0):5.2f} s)  flown {result.flown_length_m:8.1f} m  certified bound "
         f"{result.lower_bound_m:8.1f} m ({'-' if cert is None else cert.method}, "
