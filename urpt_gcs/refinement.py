@@ -17,6 +17,8 @@ leave it more room to move.
 The search is a pattern search per stop: towards the straight line between its neighbours
 (where the two legs are shortest), and around it at a step that halves when nothing around
 helps. Stops that are not neighbours move together, so every check of a sweep is one call.
+It alternates with 2-opt on the order of the moved stops (each new leg checked too), until
+2-opt finds nothing.
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ _LAST_STEP_M = 0.01
 # Sweeps at most (a sweep that moves nothing halves every step, so this is never reached
 # on a tour of sane size).
 _MAX_SWEEPS = 400
+# Rounds of moving the stops and 2-opt on their order.
+_ROUNDS = 4
 # A move must gain at least this much (metres) to count.
 _MIN_GAIN_M = 1e-6
 
@@ -219,6 +223,50 @@ def refine_tour(
     groups = [np.flatnonzero(colour == c) for c in range(3) if (colour == c).any()]
     if depot is None and n <= 2:
         groups = [np.array([k]) for k in range(n)]
+    perm = np.arange(n)
+    moves = sweeps = 0
+    for _ in range(_ROUNDS):
+        m, w = _pattern_search(site, pts, sees, heading, depot, step, groups, started, time_limit_s)
+        moves, sweeps = moves + m, sweeps + w
+        # With the stops moved, a new order may be shorter: 2-opt, each new leg checked.
+        if not _two_opt(site, pts, sees, heading, perm, depot):
+            break
+        # Look around the stops again, close by: they moved little.
+        step = np.minimum(_FIRST_STEP * smallest[perm], 16.0 * _LAST_STEP_M)
+    after = _closed_length(pts, depot)
+    if after >= before:
+        return tour, Refinement(before, before, 0, sweeps, time.perf_counter() - started)
+    old_xy = tour.points_xy[keep][perm]
+    refined = dataclasses.replace(
+        tour,
+        order=tuple(
+            v if np.array_equal(pts[i], old_xy[i]) else -1
+            for i, v in enumerate(np.asarray(tour.order)[keep][perm].tolist())
+        ),
+        points_xy=pts,
+        sees=sees,
+        headings_deg=heading,
+        length=after,
+        lower_bound=min(tour.lower_bound, after),
+        notes=(*tour.notes, f"stops moved within their regions: {before:.1f} m -> {after:.1f} m"),
+    )
+    return refined, Refinement(before, after, moves, sweeps, time.perf_counter() - started)
+
+
+def _pattern_search(
+    site: Site,
+    pts: FloatArray,
+    sees: BoolArray,
+    heading: FloatArray | None,
+    depot: FloatArray | None,
+    step: FloatArray,
+    groups: list[np.ndarray],
+    started: float,
+    time_limit_s: float,
+) -> tuple[int, int]:
+    """Move the stops (``pts``, in place) until every step is down to a centimetre; return
+    the moves made and the sweeps taken."""
+    before = _closed_length(pts, depot)
     theta = np.arange(_DIRECTIONS) * (2.0 * math.pi / _DIRECTIONS)
     ring = np.column_stack([np.cos(theta), np.sin(theta)])
     moves = sweeps = 0
@@ -263,24 +311,62 @@ def refine_tour(
             step[k[~moved]] *= 0.5
         if gained <= 1e-9 * max(before, 1.0) and bool(np.all(step < _LAST_STEP_M)):
             break
-    after = _closed_length(pts, depot)
-    if after >= before:
-        return tour, Refinement(before, before, 0, sweeps, time.perf_counter() - started)
-    old_xy = tour.points_xy[keep]
-    refined = dataclasses.replace(
-        tour,
-        order=tuple(
-            v if np.array_equal(pts[i], old_xy[i]) else -1
-            for i, v in enumerate(np.asarray(tour.order)[keep].tolist())
-        ),
-        points_xy=pts,
-        sees=sees,
-        headings_deg=heading,
-        length=after,
-        lower_bound=min(tour.lower_bound, after),
-        notes=(*tour.notes, f"stops moved within their regions: {before:.1f} m -> {after:.1f} m"),
-    )
-    return refined, Refinement(before, after, moves, sweeps, time.perf_counter() - started)
+    return moves, sweeps
+
+
+def _two_opt(
+    site: Site,
+    pts: FloatArray,
+    sees: BoolArray,
+    heading: FloatArray | None,
+    perm: np.ndarray,
+    depot: FloatArray | None,
+) -> bool:
+    """Reverse stretches of the tour (``pts`` and what goes with each stop, in place) while
+    that shortens it and both new legs clear the terrain; whether anything changed."""
+    n = len(pts)
+    changed = False
+    h = site.camera.altitude_m
+    first = 0 if depot is not None else 1
+    for _ in range(n):
+        improved = False
+        for i in range(first, n - 1):
+            # Reversing stops i..j swaps the legs (a, b), (c, d) for (a, c), (b, d).
+            j = np.arange(i + 1, n)
+            if depot is not None:
+                a = pts[i - 1] if i > 0 else depot
+                d = np.vstack([pts, depot])[j + 1]
+            else:
+                a = pts[i - 1]
+                d = pts[(j + 1) % n]
+            b, c = pts[i], pts[j]
+            gain = (
+                math.hypot(*(b - a))
+                + np.hypot(*(d - c).T)
+                - np.hypot(*(c - a).T)
+                - np.hypot(*(d - b[None, :]).T)
+            )
+            if gain.size == 0 or gain.max() <= _MIN_GAIN_M:
+                continue
+            best = int(gain.argmax())
+            start = np.array([[a[0], a[1], h], [b[0], b[1], h]])
+            end = np.array([[c[best][0], c[best][1], h], [d[best][0], d[best][1], h]])
+            if site.fill is not None:
+                site.fill(start[:, :2], end[:, :2])
+            prof = segment_profile(site.terrain, start, end, site.workers)
+            if not bool(
+                np.all(prof.unknown_fraction == 0.0)
+                and np.all(prof.excess_m <= -site.min_clearance_m)
+            ):
+                continue
+            k = int(j[best])
+            for arr in (pts, sees, perm, heading):
+                if arr is not None:
+                    arr[i : k + 1] = arr[i : k + 1][::-1].copy()
+            improved = changed = True
+        if not improved:
+            break
+    return changed
 
 
 def _thin(site: Site, tour: Tour, depot: FloatArray | None) -> tuple[np.ndarray, BoolArray]:
