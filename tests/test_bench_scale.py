@@ -23,7 +23,8 @@ def test_bench_scale_plans_a_tiny_site_and_reports_every_column(tmp_path: Path) 
     assert row["status"] == "ok", row["status"]
     assert (int(row["targets"]), int(row["size_px"])) == (3, 600)
     assert float(row["wall_s"]) > 0.0 and float(row["peak_rss_mb"]) > 0.0
-    assert int(row["viewpoints"]) >= 3 and float(row["tour_m"]) > 0.0
+    # Refined, the one stop may sit right above home when home's plane sees every target.
+    assert int(row["viewpoints"]) >= 3 and float(row["tour_m"]) >= 0.0
     assert float(row["read_only_s"]) > 0.0
     assert float(row["ratio"]) > 0.0
     for stage in ("terrain", *TERRAIN_STAGES, "solve"):

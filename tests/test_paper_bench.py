@@ -12,8 +12,12 @@ from urpt_gcs.cli import main
 
 def test_bench_paper_quick(tmp_path: Path) -> None:
     result = CliRunner().invoke(
-        main, ["bench", "paper", "--quick", "--out", str(tmp_path), "--heuristic-time", "0.3"]
-    )
+        main,
+        [
+            "bench", "paper", "--quick", "--out", str(tmp_path), "--heuristic-time", "0.3",
+            "--bound-time", "0.2",
+        ],
+    )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "Table I" in result.stdout
     rows = list(csv.DictReader((tmp_path / "results.csv").open()))
@@ -30,6 +34,8 @@ def test_bench_paper_quick(tmp_path: Path) -> None:
         "approx",
         "lower_bound",
         "naive",
+        "refined",
+        "certified_bound",
     ):
         assert key in rows[0]
     for row in rows:
@@ -40,6 +46,10 @@ def test_bench_paper_quick(tmp_path: Path) -> None:
         # Flying over every target is one of the candidate tours.
         assert optimum <= float(row["naive"]) + 1e-6
         assert float(row["approx_path"]) <= float(row["theorem_factor"]) * optimum
+        # Refinement never lengthens; the continuous bound is below the refined tour.
+        assert float(row["refined"]) <= optimum + 1e-6
+        assert 0.0 <= float(row["certified_bound"]) <= float(row["refined"]) + 1e-6
+    assert "Continuous gap" in result.stdout and "Refinement:" in result.stdout
 
 
 def test_tables_survive_an_instance_seen_from_one_point(tmp_path: Path) -> None:

@@ -73,7 +73,9 @@ def _plan_at(job: tuple[Path, Path, PlanSettings, float]) -> AltitudePoint:
     dem, targets, settings, altitude = job
     started = time.perf_counter()
     try:
-        result = plan(dem, targets, dataclasses.replace(settings, altitude_m=altitude, workers=1))
+        # Only the flight is compared here: the kept plane is certified on its own.
+        trial = dataclasses.replace(settings, altitude_m=altitude, workers=1, certify=False)
+        result = plan(dem, targets, trial)
     except UrptError as exc:
         return AltitudePoint(altitude, None, None, time.perf_counter() - started, str(exc))
     return AltitudePoint(

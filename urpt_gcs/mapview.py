@@ -23,7 +23,7 @@ from matplotlib.transforms import Affine2D
 
 from urpt_gcs.mission import waypoint_positions
 from urpt_gcs.planner import Plan
-from urpt_gcs.report import flown_stops, sortie_colour
+from urpt_gcs.report import flight_quality, flown_stops, sortie_colour
 from urpt_gcs.terrain import WGS84, FloatArray, Terrain
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.
@@ -249,13 +249,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     ax.set_ylabel("northing (m)")
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.tick_params(labelsize=7)
-    quality = (
-        "proven optimal"
-        if data["proven_optimal"]
-        else f"≤ {data['gap_pct']:.1f} % above optimal"
-        if data["gap_pct"] is not None
-        else "no bound"
-    )
+    quality = flight_quality(data, short=True)
     count = len(data["sorties"])
     sorties = f" in {count} sorties, each from home and back" if count > 1 else ""
     ax.set_title(

@@ -19,6 +19,7 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.camera import Frame, true_bearing_deg
+from urpt_gcs.certificate import Certificate, bound_time_s, certify, outer_regions
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance, cover_sets, instance_bytes
 from urpt_gcs.inputs import require_memory
@@ -30,6 +31,7 @@ from urpt_gcs.mission import (
     build_mission,
     waypoint_positions,
 )
+from urpt_gcs.refinement import Refinement, Site, refine_tour, written_grid
 from urpt_gcs.safety import (
     FlightModel,
     Leg,
@@ -41,6 +43,7 @@ from urpt_gcs.safety import (
     split_sorties,
 )
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, choose, prepare, solve
+from urpt_gcs.solvers.base import geometric_lower_bound
 from urpt_gcs.sorties import SEARCH_SHARE, SortieOrder, order_sorties
 from urpt_gcs.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.terrain import (
@@ -101,6 +104,11 @@ class PlanSettings:
     frame: Frame | None = None
     gsd_cm: float | None = None
     headings: int = DEFAULT_HEADINGS
+    # Seconds for the certified lower bound (None: min(5 s, half the time limit)).
+    bound_time_s: float | None = None
+    refine: bool = True
+    # Whether to certify the flight (a plan tried only for its length may skip it).
+    certify: bool = True
 
     def __post_init__(self) -> None:
         # The camera's own checks (GSD without pixels, headings out of range) run here, so a
@@ -164,6 +172,13 @@ class PlanSettings:
                 if -90 <= lon <= 90 and -180 <= lat <= 180:
                     hint = f": did you swap lat and lon? Give --home LAT,LON: --home {lon},{lat}"
                 raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees{hint}")
+        if self.bound_time_s is not None and not (
+            math.isfinite(self.bound_time_s) and 0.0 < self.bound_time_s <= 3600.0
+        ):
+            raise SettingsError(
+                f"--bound-time {self.bound_time_s} is out of range: give a number of seconds "
+                "above 0, up to 3600"
+            )
         if self.band is not None and self.band < 1:
             raise SettingsError(f"--band {self.band} is below 1: bands are numbered from 1")
 
@@ -203,6 +218,21 @@ class Plan:
     sortie_order: SortieOrder | None = None
     # With --altitude auto: every altitude planned and the one kept.
     altitude_sweep: AltitudeSweep | None = None
+    # The solver's tour before and after its stops were moved within their regions.
+    refinement: Refinement | None = None
+    # The certified lower bound of every flight that photographs every target.
+    certificate: Certificate | None = None
+    # The solver's claim for its tour (before any stop moved): no tour over the candidate
+    # viewpoints is shorter.
+    optimal_over_candidates: bool = False
+
+    @property
+    def lower_bound_m(self) -> float:
+        """A lower bound of every flight from home that photographs every target, from
+        anywhere on the plane (not only the candidate viewpoints)."""
+        if self.certificate is not None:
+            return self.certificate.lower_bound_m
+        return min(geometric_lower_bound(self.instance), self.flown_length_m)
 
     @property
     def flown_length_m(self) -> float:
@@ -212,17 +242,21 @@ class Plan:
     @property
     def flown_gap(self) -> float:
         """How much longer the flight may be than the shortest that sees every target:
-        (flown - LB) / LB.
+        (flown - LB) / LB, with LB :attr:`lower_bound_m`.
 
-        The tour's lower bound bounds any closed tour from home that sees every target, and
-        sorties from home joined at home are one such tour, no longer than their total: so it
-        bounds the total of any set of sorties too. With one sortie this is the tour's gap.
+        The bound holds for any closed flight from home that sees every target, and sorties
+        from home joined at home are one such flight, no longer than their total: so it
+        bounds the total of any set of sorties too.
         """
-        if len(self.sorties) == 1:
-            return self.tour.gap
-        if self.tour.lower_bound <= 0.0:
-            return math.inf
-        return max(self.flown_length_m - self.tour.lower_bound, 0.0) / self.tour.lower_bound
+        bound = self.lower_bound_m
+        if bound <= 0.0:
+            return 0.0 if self.flown_length_m <= 0.0 else math.inf
+        return max(self.flown_length_m - bound, 0.0) / bound
+
+    @property
+    def proven_optimal(self) -> bool:
+        """Whether the flight is certified within the tolerance of the shortest possible."""
+        return self.certificate is not None and self.certificate.proven(self.flown_length_m)
 
     @property
     def flight_model(self) -> FlightModel:
@@ -492,6 +526,7 @@ def finish_plan(
 ) -> Plan:
     """From the solver's tour to the checked plan: stops given their margin, ordered and cut
     into sorties, written as missions and checked as written."""
+    over_candidates = tour.proven_optimal
     stages.say(f"stops seeing from anywhere within {settings.position_tolerance_m:g} m")
     tour, margin_warnings = robust_tour(
         area.terrain,
@@ -504,6 +539,11 @@ def finish_plan(
         site.names,
     )
     stages.lap("margin")
+    refinement = None
+    if settings.refine:
+        stages.say("moving the stops within what they see")
+        tour, refinement = _refine(site, area, tour, settings)
+        stages.lap("refine")
     endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
     budget = SEARCH_SHARE * settings.solve.time_limit_s
     stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
@@ -521,6 +561,13 @@ def finish_plan(
     stages.say("checking the missions")
     flight = _fly(site, area, tour, settings)
     stages.lap("checks")
+    certificate = None
+    if settings.certify:
+        bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
+        stages.say(f"bounding the shortest possible flight (up to {bound_s:.1f} s)")
+        flown_m = math.fsum(s.length_m for s in flight.sorties)
+        certificate = _certify(site, area, instance, flown_m, bound_s, settings.workers)
+        stages.lap("bound")
     return Plan(
         settings=settings,
         dem=site.dem,
@@ -545,7 +592,64 @@ def finish_plan(
         timings_s=stages.timings_s,
         warnings=(*margin_warnings, *flight.warnings),
         sortie_order=sortie_order,
+        refinement=refinement,
+        certificate=certificate,
+        optimal_over_candidates=over_candidates,
     )
+
+
+# Seconds refinement may take at most: it ends when its steps are down to a centimetre (so
+# that a plan does not depend on the machine's load), this only guards against a runaway.
+_REFINE_MAX_S = 60.0
+
+
+def _refine(
+    site: _Site, area: _Area, tour: Tour, settings: PlanSettings
+) -> tuple[Tour, Refinement]:
+    """Move the stops within what they see, checked as the mission will be (the position
+    margin, the written grid and the legs' clearance)."""
+    to_geo = pyproj.Transformer.from_crs(site.crs, WGS84, always_xy=True)
+    to_grid = pyproj.Transformer.from_crs(WGS84, site.crs, always_xy=True)
+
+    def to_latlon(xy: FloatArray) -> FloatArray:
+        lon, lat = to_geo.transform(xy[:, 0], xy[:, 1])
+        return np.column_stack([lat, lon]).astype(np.float64)
+
+    def to_xy(lat_lon: FloatArray) -> FloatArray:
+        x, y = to_grid.transform(lat_lon[:, 1], lat_lon[:, 0])
+        return np.column_stack([x, y]).astype(np.float64)
+
+    def fill(a: FloatArray, b: FloatArray) -> None:
+        fill_along(site.dem, area.terrain, a, b)
+
+    check = Site(
+        terrain=area.terrain,
+        targets_xy=site.targets_xy,
+        ground_m=area.ground_m,
+        camera=area.camera,
+        tolerance_m=settings.position_tolerance_m,
+        min_clearance_m=settings.min_clearance_m,
+        written=written_grid(to_latlon, to_xy),
+        fill=fill,
+        workers=settings.workers,
+    )
+    return refine_tour(check, tour, site.home_xy, _REFINE_MAX_S)
+
+
+def _certify(
+    site: _Site,
+    area: _Area,
+    instance: Instance,
+    flown_m: float,
+    time_limit_s: float,
+    workers: int | None,
+) -> Certificate:
+    """The certified lower bound of every flight from home that sees every target."""
+    regions, ratio = outer_regions(
+        area.terrain, site.targets_xy, area.ground_m, area.camera, site.home_xy, workers=workers
+    )
+    also = geometric_lower_bound(instance)
+    return certify(regions, flown_m, time_limit_s, also, ratio)
 
 
 def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _Site:

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from urpt_gcs.certificate import PROVEN_GAP
 from urpt_gcs.mission import Mission, photo_headings
 from urpt_gcs.planner import Plan
 
@@ -118,9 +119,16 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         # What is flown: every sortie from home and back, added up (the tour itself with one
         # sortie). The bound holds for it: sorties joined at home are one closed tour.
         "tour_length_m": round(plan.flown_length_m, 3),
-        "lower_bound_m": round(tour.lower_bound, 3),
-        "gap_pct": _round(100.0 * plan.flown_gap, 2),
-        "proven_optimal": tour.proven_optimal and len(plan.sorties) == 1,
+        # Certified for every flight from home that photographs every target, from anywhere
+        # on the plane; rounded down, and the gap up, so that neither claims too much.
+        "lower_bound_m": math.floor(plan.lower_bound_m * 1000.0) / 1000.0,
+        "gap_pct": _round_up(100.0 * plan.flown_gap, 2),
+        "proven_optimal": plan.proven_optimal,
+        "proven_gap_pct": 100.0 * PROVEN_GAP,
+        # The solver's own claim: no tour over the candidate viewpoints is shorter.
+        "optimal_over_candidates": plan.optimal_over_candidates,
+        **_refinement(plan),
+        "bound": _bound(plan),
         "solver_tour_length_m": round(
             tour.length if plan.sortie_order is None else plan.sortie_order.tour_length_m, 3
         ),
@@ -170,6 +178,40 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "files": files or [],
         **_frame_camera(plan),
         **_altitude_curve(plan),
+    }
+
+
+def _round_up(x: float, digits: int = 2) -> float | None:
+    if not math.isfinite(x):
+        return None
+    scale = 10.0**digits
+    return math.ceil(x * scale - 1e-9) / scale
+
+
+def _refinement(plan: Plan) -> dict[str, Any]:
+    """The solver's tour before and after its stops were moved within their regions."""
+    done = plan.refinement
+    if done is None:
+        return {"discrete_length_m": round(plan.tour.length, 3), "refined_length_m": None}
+    return {
+        "discrete_length_m": round(done.before_m, 3),
+        "refined_length_m": round(done.after_m, 3),
+        "refine_shortened_pct": round(done.shortened_pct, 3),
+        "refine_moves": done.moves,
+        "refine_s": round(done.seconds, 3),
+    }
+
+
+def _bound(plan: Plan) -> dict[str, Any] | None:
+    """How the certified bound was found."""
+    c = plan.certificate
+    if c is None:
+        return None
+    return {
+        "method": c.method,
+        "seconds": round(c.seconds, 3),
+        "sectors": c.sectors,
+        "outer_to_inner_area": _round(c.area_ratio, 3),
     }
 
 
@@ -280,6 +322,15 @@ def _minutes(seconds: float) -> str:
     return f"{m} min {s:02d} s"
 
 
+def _refine_line(data: dict[str, Any]) -> str:
+    if data.get("refined_length_m") is None:
+        return f"refinement     off; the solver's tour is {data['discrete_length_m']:.1f} m"
+    return (
+        f"refinement     stops moved within what they see: {data['discrete_length_m']:.1f} m -> "
+        f"{data['refined_length_m']:.1f} m ({data['refine_shortened_pct']:.2f} % shorter)"
+    )
+
+
 def _dem_line(dem: dict[str, Any]) -> str:
     unit = str(dem["vertical_unit"])
     if not dem["vertical_unit_declared"]:
@@ -296,17 +347,35 @@ def _dem_line(dem: dict[str, Any]) -> str:
     return f"dem            {heights}; band {dem['band']}; {where}"
 
 
+def flight_quality(data: dict[str, Any], short: bool = False) -> str:
+    """How far at most the flight is from the shortest possible, in words."""
+    if data["proven_optimal"]:
+        if short:
+            return "proven optimal"
+        return (
+            f"proven optimal (within {data['proven_gap_pct']:g} % of the certified lower bound "
+            f"{data['lower_bound_m']:.1f} m)"
+        )
+    if data["gap_pct"] is None:
+        return "no lower bound" if short else "no lower bound available"
+    if short:
+        return f"within {_percent(data['gap_pct'])} % of the shortest possible"
+    return (
+        f"within {_percent(data['gap_pct'])} % of the shortest possible flight "
+        f"(certified lower bound {data['lower_bound_m']:.1f} m)"
+    )
+
+
+def _percent(pct: float) -> str:
+    """A percentage to two significant figures or so, rounded up: never shown smaller."""
+    digits = 1 if pct >= 1.0 else 2 if pct >= 0.1 else 3
+    scale = 10.0**digits
+    return f"{math.ceil(pct * scale - 1e-9) / scale:.{digits}f}"
+
+
 def summary_text(data: dict[str, Any]) -> str:
     """One screen of text from :func:`summary`'s dictionary."""
-    if data["proven_optimal"]:
-        quality = f"proven optimal over the {data['viewpoints']} candidate viewpoints"
-    elif data["gap_pct"] is None:
-        quality = "no lower bound available"
-    else:
-        quality = (
-            f"at most {data['gap_pct']:.1f} % above optimal "
-            f"(lower bound {data['lower_bound_m']:.1f} m)"
-        )
+    quality = flight_quality(data)
     home = data["home"]
     lines = [
         f"targets        {data['targets']}  ({', '.join(data['target_names'][:6])}"
@@ -315,7 +384,13 @@ def summary_text(data: dict[str, Any]) -> str:
         f"viewpoints     {data['viewpoints']} candidates, {data['tour_stops']} in the tour",
         f"{'flown' if len(data['sorties']) > 1 else 'tour':<15s}"
         f"{data['tour_length_m']:.1f} m, {quality}",
-        f"solver         {data['solver']} in {data['solve_s']:.2f} s",
+        f"solver         {data['solver']} in {data['solve_s']:.2f} s"
+        + (
+            f", optimal over the {data['viewpoints']} candidate viewpoints"
+            if data["optimal_over_candidates"]
+            else ""
+        ),
+        _refine_line(data),
         f"flight time    {_minutes(data['flight_time_s'])} (estimated at "
         f"{data['cruise_speed_m_s']:g} m/s, {data['hold_s']:g} s hold per photo)",
         f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, "

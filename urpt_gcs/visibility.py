@@ -392,3 +392,170 @@ def line_of_sight(
     when the terrain rises above the segment anywhere, or the segment crosses unknown ground.
     """
     return clear_of_terrain(terrain, eye_xyz, target_xyz, workers)
+
+
+# Sectors of the outer star each target's region is bounded by: the pieces of the lower
+# bound follow it to half a degree.
+STAR_SECTORS = 720
+
+
+@njit(cache=True)
+def _box_range(z, col0, row0, a, b, d, e, s0, s1, t0, t1, scale):  # type: ignore[no-untyped-def]
+    """Over the bounding box of the annular sector ``s0 <= s <= s1, t0 <= t <= t1`` around
+    pixel ``(col0, row0)``: the least and greatest height of the bilinear surface and a
+    bound of its slope (metres per metre). ``(-inf, inf, inf)`` when the box reaches
+    unknown ground (nodata or off the grid), NaNs when it lies wholly off the grid."""
+    c0, c1 = math.cos(t0), math.cos(t1)
+    n0, n1 = math.sin(t0), math.sin(t1)
+    xs = (s0 * c0, s0 * c1, s1 * c0, s1 * c1)
+    ys = (s0 * n0, s0 * n1, s1 * n0, s1 * n1)
+    x_lo, x_hi = min(xs), max(xs)
+    y_lo, y_hi = min(ys), max(ys)
+    # The arc's extreme points where it crosses an axis direction.
+    for q in range(5):
+        ang = q * 0.5 * math.pi
+        if t0 <= ang <= t1:
+            x_lo, x_hi = min(x_lo, s1 * math.cos(ang)), max(x_hi, s1 * math.cos(ang))
+            y_lo, y_hi = min(y_lo, s1 * math.sin(ang)), max(y_hi, s1 * math.sin(ang))
+    c_lo, c_hi, r_lo, r_hi = np.inf, -np.inf, np.inf, -np.inf
+    for x in (x_lo, x_hi):
+        for y in (y_lo, y_hi):
+            c = col0 + a * x + b * y
+            r = row0 + d * x + e * y
+            c_lo, c_hi = min(c_lo, c), max(c_hi, c)
+            r_lo, r_hi = min(r_lo, r), max(r_hi, r)
+    rows, cols = z.shape
+    if c_lo > cols - 0.5 or r_lo > rows - 0.5 or c_hi < -0.5 or r_hi < -0.5:
+        # Wholly off the grid: a line of sight through it runs over unknown ground.
+        return np.nan, np.nan, np.nan
+    if c_lo < -0.5 or r_lo < -0.5 or c_hi > cols - 0.5 or r_hi > rows - 0.5:
+        return -np.inf, np.inf, np.inf
+    # Along each axis the bilinear surface is linear between lines through pixel centres,
+    # so over the box it is least and greatest at the box's corners and where those lines
+    # cross it or its edges.
+    lo, hi = np.inf, -np.inf
+    nc = math.floor(c_hi) - math.floor(c_lo) + 2
+    nr = math.floor(r_hi) - math.floor(r_lo) + 2
+    for jr in range(nr):
+        r = r_lo if jr == 0 else (r_hi if jr == nr - 1 else math.floor(r_lo) + jr)
+        for ic in range(nc):
+            c = c_lo if ic == 0 else (c_hi if ic == nc - 1 else math.floor(c_lo) + ic)
+            v = bilinear_at(z, c, r)
+            if math.isnan(v):
+                return -np.inf, np.inf, np.inf
+            lo, hi = min(lo, v), max(hi, v)
+    # Within a cell the slope along columns is at most the larger difference of its two
+    # rows' nodes (and likewise along rows); beyond the outermost centres it is zero.
+    gc, gr = 0.0, 0.0
+    for j in range(max(math.floor(r_lo), 0), min(math.floor(r_hi), rows - 2) + 1):
+        for i in range(max(math.floor(c_lo), 0), min(math.floor(c_hi), cols - 2) + 1):
+            gc = max(gc, abs(z[j, i + 1] - z[j, i]), abs(z[j + 1, i + 1] - z[j + 1, i]))
+            gr = max(gr, abs(z[j + 1, i] - z[j, i]), abs(z[j + 1, i + 1] - z[j, i + 1]))
+    return lo, hi, math.sqrt(gc * gc + gr * gr) * scale
+
+
+@njit(cache=True, nogil=True)
+def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, outer, inner):  # type: ignore[no-untyped-def]
+    """Per target ``k`` and sector ``j``: into ``outer[k, j]`` a reach no point of the sector
+    that sees the target exceeds, into ``inner[k, j]`` one up to which every point does.
+
+    The sector is walked in bands ``[s0, s0 + step]``; over a band the surface lies between
+    ``lo`` and ``hi`` and its slope is at most ``g``. A plane point at ``s`` of the sector is
+    hidden once the terrain at some ``s' < s`` on its ray rises above the line of sight,
+    ``z(s') > z_p + s' h / s``: terrain at least ``lo`` over the band hides every
+    ``s > s0 h / (lo - z_p)`` (and ``s > s0``), the rule of the exact ray walk with the band's
+    lowest ground. Points are certainly seen while ``(z(s') - z_p) / s' <= h / s`` for every
+    ``s'`` before them: in a band that ratio is at most ``(hi - z_p) / s0``, and at most the
+    steepest slope ``G`` of the bands from the target to it (``z(s') - z_p <= G s'``).
+    """
+    sectors = outer.shape[1]
+    scale = math.sqrt(a * a + b * b + d * d + e * e)
+    for k in range(col0.shape[0]):
+        for j in range(sectors):
+            t0 = 2.0 * math.pi * j / sectors
+            t1 = 2.0 * math.pi * (j + 1) / sectors
+            best = cone[k]
+            sure = least[k]
+            steepest = 0.0
+            i = 0
+            while i * step < max(best, sure):
+                s0 = i * step
+                lo, hi, g = _box_range(
+                    z, col0[k], row0[k], a, b, d, e, s0, s0 + step, t0, t1, scale
+                )
+                if math.isnan(lo):
+                    # Every point from here on is off the grid, or seen across it.
+                    best = min(best, s0)
+                    sure = min(sure, s0)
+                    break
+                if s0 < best and s0 > 0.0 and lo - 2e-6 > ground[k]:
+                    best = min(best, max(s0, height[k] * s0 / (lo - 2e-6 - ground[k])))
+                if s0 < sure and math.isinf(hi):
+                    sure = s0
+                elif s0 < sure:
+                    steepest = max(steepest, g)
+                    ratio = 0.0
+                    if hi > ground[k]:
+                        ratio = steepest
+                        if s0 > 0.0:
+                            ratio = min(ratio, (hi - ground[k]) / s0)
+                    if ratio > 0.0:
+                        sure = min(sure, height[k] / ratio)
+                i += 1
+            outer[k, j] = best
+            inner[k, j] = min(sure, best)
+
+
+def star_reach(
+    terrain: Terrain,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    sectors: int = STAR_SECTORS,
+    workers: int | None = 1,
+) -> tuple[FloatArray, FloatArray]:
+    """Per target and angular sector, where its visibility region certainly ends and where
+    it certainly still holds, shapes (targets, sectors) each.
+
+    Sector ``j`` spans the azimuths ``[2 pi j / K, 2 pi (j + 1) / K]`` (counter-clockwise
+    from east) around the target's nadir. No point of the sector farther than the outer
+    reach sees the target; every point of it no farther than the inner reach does (at every
+    heading of a frame camera). Both hold for the DEM's bilinear surface exactly: along a ray
+    the seen set is an interval from the nadir, and each band of the sector is walked with the
+    lowest (outer) and highest (inner) ground its cells may hold there. Unknown ground hides
+    nothing for the outer reach, bar ground wholly off the grid (a line of sight over it is
+    not known to be clear), and ends the inner one.
+    """
+    targets_xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    ground = np.ascontiguousarray(ground_m, dtype=np.float64)
+    m = len(targets_xy)
+    outer = np.zeros((m, sectors), dtype=np.float64)
+    inner = np.zeros((m, sectors), dtype=np.float64)
+    if m == 0:
+        return outer, inner
+    height = camera.altitude_m - ground
+    cone = np.ascontiguousarray(camera.cone_radius_m(ground))
+    # A hair inside what is seen at every heading, so that rounding never claims too much.
+    least = np.ascontiguousarray(camera.least_half_width_m(ground) * (1.0 - 1e-9))
+    inv = ~terrain.transform
+    col0, row0 = terrain.pixel_coords(targets_xy[:, 0], targets_xy[:, 1])
+    col0, row0 = np.ascontiguousarray(col0), np.ascontiguousarray(row0)
+    step = terrain.cell_m / 2.0
+    z = terrain.elevation_m
+
+    def run(lo: int, hi: int) -> None:
+        _star_kernel(
+            z, col0[lo:hi], row0[lo:hi], ground[lo:hi], height[lo:hi], cone[lo:hi],
+            least[lo:hi], inv.a, inv.b, inv.d, inv.e, step, outer[lo:hi], inner[lo:hi],
+        )  # fmt: skip
+
+    threads = min(resolve_workers(workers), max(m // 4, 1))
+    if threads <= 1:
+        run(0, m)
+    else:
+        bounds = np.linspace(0, m, 2 * threads + 1).astype(np.intp).tolist()
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
+                future.result()
+    inner *= 1.0 - 1e-9
+    return outer, inner

@@ -10,7 +10,9 @@ terrain itself: rays stop at its edge. There is no depot, as in the paper.
 Per instance: the exact optimum (and whether it is proven) with its time; the heuristic's
 tour; the paper's approximation (the path with its circles, and the photo tour flown along
 it) with the theorem's factor; the paper's lower bound; and the naive tour over the targets'
-nadir points.
+nadir points. Then the continuous problem, which the paper's optimum is not the answer to:
+the exact tour refined (its stops moved within what they see, on the terrain) and the
+certified lower bound of every tour from anywhere on the plane, and the gap between them.
 """
 
 from __future__ import annotations
@@ -30,9 +32,11 @@ import pyproj
 from affine import Affine
 
 from urpt_gcs.bench import rows_csv
+from urpt_gcs.certificate import certify, outer_regions
 from urpt_gcs.cluster import map_jobs
 from urpt_gcs.gtsp import Covers, Instance, build_instance
 from urpt_gcs.output import write_all
+from urpt_gcs.refinement import Site, refine_tour
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.approx import paper_path
 from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
@@ -90,6 +94,12 @@ class Row:
     theorem_factor: float
     lower_bound: float
     naive: float
+    # The exact tour refined on the terrain, and the certified bound of the continuous problem.
+    refined: float = 0.0
+    refine_s: float = 0.0
+    certified_bound: float = 0.0
+    bound_s: float = 0.0
+    bound_method: str = ""
 
 
 def tin_terrain(seed: int) -> Terrain:
@@ -156,8 +166,20 @@ def naive_length(targets_xy: FloatArray) -> float:
     return found[1]
 
 
+# Seconds per instance for the certified bound, by default, and at most for refinement
+# (which ends on its own well before: its steps are down to a centimetre).
+BOUND_S = 0.5
+REFINE_S = 30.0
+
+
 def run_instance(
-    terrain_seed: int, terrain: Terrain, m: int, fov_deg: float, samples: int, heuristic_s: float
+    terrain_seed: int,
+    terrain: Terrain,
+    m: int,
+    fov_deg: float,
+    samples: int,
+    heuristic_s: float,
+    bound_s: float = BOUND_S,
 ) -> Row:
     """Solve one study instance every way."""
     targets = random_targets(terrain_seed, m)
@@ -165,6 +187,12 @@ def run_instance(
     started = time.perf_counter()
     exact = solve(inst, "exact")
     exact_s = time.perf_counter() - started
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    camera = Camera(altitude_m=ALTITUDE, fov_deg=fov_deg)
+    refined, done = refine_tour(Site(terrain, targets, ground, camera), exact, None, REFINE_S)
+    regions, ratio = outer_regions(terrain, targets, ground, camera, None)
+    paper_bound = paper_lower_bound(targets, fov_deg)
+    cert = certify(regions, refined.length, bound_s, paper_bound, ratio)
     name = "heuristic" if "heuristic" in SOLVERS else "ortools"
     heur = solve(inst, name, SolveSettings(time_limit_s=heuristic_s, seed=terrain_seed))
     approx = solve(inst, "approx")
@@ -187,6 +215,12 @@ def run_instance(
         theorem_factor=round(bounds.factor, 3),
         lower_bound=round(paper_lower_bound(targets, fov_deg), 6),
         naive=round(naive_length(targets), 6),
+        refined=round(refined.length, 6),
+        refine_s=round(done.seconds, 4),
+        # Rounded down: a bound is never shown larger than it is.
+        certified_bound=math.floor(cert.lower_bound_m * 1e6) / 1e6,
+        bound_s=round(cert.seconds, 4),
+        bound_method=cert.method,
     )
 
 
@@ -207,10 +241,10 @@ def _terrain(seed: int) -> Terrain:
     return tin_terrain(seed)
 
 
-def instance_job(key: Key, heuristic_s: float) -> Row:
+def instance_job(key: Key, heuristic_s: float, bound_s: float = BOUND_S) -> Row:
     """One study instance, as a job for :func:`urpt_gcs.cluster.map_jobs`."""
     t, m, fov, d = key
-    return run_instance(t, _terrain(t), m, fov, d, heuristic_s)
+    return run_instance(t, _terrain(t), m, fov, d, heuristic_s, bound_s)
 
 
 def run_paper(
@@ -220,12 +254,14 @@ def run_paper(
     progress: Progress | None = None,
     client: Client | None = None,
     grid: Sequence[Key] | None = None,
+    bound_s: float = BOUND_S,
 ) -> list[Row]:
     """Run the study (or its quick subset); write ``out_dir/results.csv`` if given.
 
     With a Dask ``client`` (:func:`urpt_gcs.cluster.open_client`) every instance is a task;
     the rows are the same as run here (every seed is fixed), but for the times. ``grid``
-    replaces the study's instances.
+    replaces the study's instances; ``bound_s`` is each instance's time for the certified
+    bound.
     """
     say = progress or (lambda _msg: None)
     keys = list(study_grid(quick) if grid is None else grid)
@@ -239,7 +275,7 @@ def run_paper(
             f"d={row.d}: optimum {row.optimum:.2f} in {row.exact_s:.2f} s"
         )
 
-    job = functools.partial(instance_job, heuristic_s=heuristic_s)
+    job = functools.partial(instance_job, heuristic_s=heuristic_s, bound_s=bound_s)
     rows = map_jobs(job, keys, client, done)
     if out_dir is not None:
         write_csv(rows, out_dir / "results.csv")
@@ -274,6 +310,22 @@ def _gap_pct(length: float, optimum: float) -> float:
     return 100.0 * (length / optimum - 1.0)
 
 
+def continuous_gap_pct(row: Row) -> float:
+    """How much longer the refined tour may be than the shortest tour from anywhere on the
+    plane, in percent, against the certified bound (0 when both are 0)."""
+    return _gap_pct(row.refined, row.certified_bound)
+
+
+def refine_pct(row: Row) -> float:
+    """How much shorter refinement made the exact discrete tour, in percent."""
+    return 100.0 * (1.0 - row.refined / row.optimum) if row.optimum > 0.0 else 0.0
+
+
+def _median_max(values: Sequence[float]) -> str:
+    v = np.asarray(values, dtype=np.float64)
+    return f"{np.median(v):.2f}/{v.max():.1f}%"
+
+
 def _mean_ratio(rows: Sequence[Row], field: str) -> str:
     """Mean of ``field / optimum`` over the rows with a positive optimum."""
     ratios = [getattr(r, field) / r.optimum for r in rows if r.optimum > 0.0]
@@ -303,6 +355,9 @@ def format_tables(rows: Sequence[Row]) -> str:
     lb_ok = all(r.lower_bound <= r.optimum + 1e-6 for r in rows)
     factor_ok = all(r.approx_path <= r.theorem_factor * r.optimum for r in positive)
     bounds = [r.lower_bound / r.optimum for r in positive]
+    cont = np.array([continuous_gap_pct(r) for r in rows])
+    shorter = np.array([refine_pct(r) for r in rows])
+    cert_ok = all(r.certified_bound <= r.refined + 1e-6 for r in rows)
     parts = [
         _cell_table("Table I: proven optimal here (the paper's ILP in 900 s)", rows, proven),
         _cell_table("Table II: heuristic's mean gap to the optimum", rows, heur_gap),
@@ -314,6 +369,16 @@ def format_tables(rows: Sequence[Row]) -> str:
         _cell_table(
             "Naive (fly over every target) / optimum", rows, lambda g: _mean_ratio(g, "naive")
         ),
+        _cell_table(
+            "Continuous gap: refined tour against the certified bound (median/max)",
+            rows,
+            lambda g: _median_max([continuous_gap_pct(r) for r in g]),
+        ),
+        _cell_table(
+            "Refinement: how much shorter than the exact discrete optimum (mean)",
+            rows,
+            lambda g: f"{np.mean([refine_pct(r) for r in g]):.2f}%",
+        ),
         f"instances {len(rows)}; proven optimal {sum(r.proven for r in rows)}; exact time "
         f"median {np.median(exact_s):.3f} s, max {exact_s.max():.3f} s; {zero} with optimum 0 "
         "(one viewpoint sees every target)",
@@ -322,6 +387,12 @@ def format_tables(rows: Sequence[Row]) -> str:
         f"paper's lower bound <= optimum on every instance: {lb_ok}; positive on "
         f"{sum(r.lower_bound > 0 for r in rows)}/{len(rows)}; mean bound / optimum "
         f"{np.mean(bounds) if bounds else math.nan:.3f}",
+        f"continuous problem: refined tour against the certified bound, gap median "
+        f"{np.median(cont):.3f} %, mean {cont.mean():.3f} %, max {cont.max():.3f} %, within 1 % "
+        f"on {int(np.sum(cont <= 1.0))}/{len(rows)}; bound <= refined tour on every instance: "
+        f"{cert_ok}; refinement shortened the discrete optimum by {shorter.mean():.2f} % on "
+        f"average (max {shorter.max():.2f} %); bound time median "
+        f"{np.median([r.bound_s for r in rows]):.2f} s",
         f"approximation path <= theorem factor x optimum on the {len(positive)} instances with "
         f"optimum > 0: {factor_ok}; mean path / optimum {_mean_ratio(positive, 'approx_path')},"
         f" mean factor {np.mean([r.theorem_factor for r in rows]):.1f}; where the optimum is 0 "
@@ -348,4 +419,7 @@ def read_csv(path: Path) -> list[Row]:
     return rows
 
 
-_EXAMPLE = Row(0, 0, 0.0, 0, 0, 0.0, False, 0.0, 0.0, 0.0, "", 0.0, 0.0, 0, 0.0, 0.0, 0.0)
+_EXAMPLE = Row(
+    0, 0, 0.0, 0, 0, 0.0, False, 0.0, 0.0, 0.0, "", 0.0, 0.0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    0.0, "",
+)  # fmt: skip

@@ -154,11 +154,19 @@ def bench_cetsp_command(
     show_default=True,
     help="Seconds the heuristic gets per instance.",
 )
+@click.option(
+    "--bound-time",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=0.5,
+    show_default=True,
+    help="Seconds the certified lower bound gets per instance.",
+)
 @cluster_options
 def bench_paper_command(
     quick: bool,
     out: Path | None,
     heuristic_time: float,
+    bound_time: float,
     scheduler: str | None,
     workers: int | None,
 ) -> None:
@@ -173,6 +181,7 @@ def bench_paper_command(
                 heuristic_s=heuristic_time,
                 progress=terminal_progress(),
                 client=client,
+                bound_s=bound_time,
             )
     except UrptError as exc:
         fail(exc)

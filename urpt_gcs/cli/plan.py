@@ -157,6 +157,18 @@ if TYPE_CHECKING:
     help="Seconds the solve stage may take (compiling the solver on first use aside).",
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for randomised solvers.")
+@click.option(
+    "--bound-time",
+    type=float,
+    default=None,
+    help="Seconds for the certified lower bound of the shortest possible flight "
+    "[default: half --time-limit, at most 5].",
+)
+@click.option(
+    "--no-refine",
+    is_flag=True,
+    help="Fly the solver's viewpoints as they are, without moving the stops within what they see.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", is_flag=True, help="Print nothing but errors.")
 @click.option(
@@ -248,6 +260,8 @@ def plan_command(
     solver: str,
     time_limit: float,
     seed: int,
+    bound_time: float | None,
+    no_refine: bool,
     as_json: bool,
     quiet: bool,
     export_gtsp: Path | None,
@@ -318,6 +332,8 @@ def plan_command(
             workers=workers,
             solver=solver,
             solve=SolveSettings(time_limit_s=time_limit, seed=seed),
+            bound_time_s=bound_time,
+            refine=not no_refine,
             mission=MissionSettings(
                 firmware=firmware,  # type: ignore[arg-type]  # validated in __post_init__
                 hold_s=hold,

@@ -1,0 +1,176 @@
+"""Certificate: how far, at most, a flight is from the shortest one any planner could find.
+
+Every point of the flight plane that sees a target lies in the target's outer star
+(:func:`urpt_gcs.visibility.star_reach`, exact on the DEM's bilinear surface and the camera).
+A closed flight from home that photographs every target enters every outer star, so the
+certified lower bound of :mod:`urpt_gcs.solvers.bound` over those stars bounds the length of
+every such flight at this altitude with this camera -- not only of tours over the planner's
+candidate viewpoints.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from urpt_gcs.solvers.bound import lower_bound
+from urpt_gcs.solvers.regions import OuterStar, RegionSet
+from urpt_gcs.terrain import FloatArray, Terrain
+from urpt_gcs.visibility import STAR_SECTORS, Camera, star_reach
+
+# Below this gap a tour is called optimal: its length is within it of the certified bound.
+PROVEN_GAP = 1e-4
+# Seconds the bound may spend by default, and its share of the solver's time limit.
+BOUND_TIME_S = 5.0
+BOUND_SHARE = 0.5
+# Regions the bound is computed over at most: beyond, the regions farthest apart (every
+# flight enters those too), since the relaxation's first round grows with their square.
+BOUND_MAX_REGIONS = 150
+# Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
+_FINE_UP_TO = 24
+_LEAST_SECTORS = 180
+
+
+@dataclass(frozen=True, slots=True)
+class Certificate:
+    """A lower bound of every flight that photographs every target, and how it was found.
+
+    ``lower_bound_m`` bounds every closed flight from ``depot`` (home; none: any closed
+    flight) on the plane whose photos see every target; ``method`` and ``seconds`` say how
+    the bound was reached, ``area_ratio`` how much wider the outer stars are than what is
+    certainly seen (their areas, summed over the targets).
+    """
+
+    lower_bound_m: float
+    method: str
+    seconds: float
+    sectors: int
+    area_ratio: float
+
+    def gap(self, length_m: float) -> float:
+        """``(length - bound) / bound``: how much longer the flight may be than the shortest."""
+        if self.lower_bound_m <= 0.0:
+            return 0.0 if length_m <= 0.0 else math.inf
+        return max(length_m - self.lower_bound_m, 0.0) / self.lower_bound_m
+
+    def proven(self, length_m: float) -> bool:
+        """Whether the flight is within :data:`PROVEN_GAP` of the shortest possible."""
+        return self.gap(length_m) <= PROVEN_GAP
+
+
+def bound_time_s(time_limit_s: float) -> float:
+    """The bound's default budget for a solver time limit."""
+    return min(BOUND_TIME_S, BOUND_SHARE * time_limit_s)
+
+
+def spread_targets(
+    targets_xy: FloatArray, radius_m: FloatArray, depot_xy: tuple[float, float] | None, k: int
+) -> list[int]:
+    """``k`` targets whose discs of ``radius_m`` lie far apart (farthest-point order), from
+    the one farthest from the depot (or from target 0); all of them when there are no more."""
+    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    r = np.asarray(radius_m, dtype=np.float64)
+    if len(xy) <= k:
+        return list(range(len(xy)))
+    origin = xy[0] if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
+    gap = np.hypot(*(xy - origin).T) - r
+    chosen: list[int] = []
+    for _ in range(k):
+        j = int(np.argmax(gap))
+        chosen.append(j)
+        gap = np.minimum(gap, np.hypot(*(xy - xy[j]).T) - r - r[j])
+        gap[chosen] = -np.inf
+    return sorted(chosen)
+
+
+def star_sectors(regions: int) -> int:
+    """Sectors per outer star for a bound over ``regions`` regions."""
+    if regions <= _FINE_UP_TO:
+        return STAR_SECTORS
+    return max(_LEAST_SECTORS, STAR_SECTORS * _FINE_UP_TO // regions // 8 * 8)
+
+
+def outer_regions(
+    terrain: Terrain,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    depot_xy: tuple[float, float] | None,
+    workers: int | None = 1,
+    max_regions: int = BOUND_MAX_REGIONS,
+) -> tuple[RegionSet, float]:
+    """The targets' outer stars as regions to enter (of at most ``max_regions`` targets far
+    apart), home as the depot, and the ratio of the stars' area to what is certainly seen.
+
+    A target whose star holds home is marked as holding the depot (the bound leaves it out):
+    a flight from home may see it without ever crossing its region's edge.
+    """
+    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    ground = np.asarray(ground_m, dtype=np.float64)
+    keep = spread_targets(xy, camera.cone_radius_m(ground), depot_xy, max_regions)
+    xy, ground = xy[keep], ground[keep]
+    sectors = star_sectors(len(keep))
+    outer, inner = star_reach(terrain, xy, ground, camera, sectors, workers)
+    stars = tuple(
+        OuterStar((float(x), float(y)), outer[i], inner[i]) for i, (x, y) in enumerate(xy.tolist())
+    )
+    inside = None if depot_xy is None else tuple(_holds(s, depot_xy) for s in stars)
+    regions = RegionSet(
+        polygons=tuple(_star_polygon(s) for s in stars),
+        depot_xy=depot_xy,
+        outer=stars,
+        depot_inside=inside,
+        name="outer visibility stars",
+    )
+    seen = float(np.sum(inner**2))
+    ratio = float(np.sum(outer**2)) / seen if seen > 0.0 else math.inf
+    return regions, ratio
+
+
+def certify(
+    regions: RegionSet,
+    length_m: float,
+    time_limit_s: float,
+    also_m: float = 0.0,
+    area_ratio: float = math.nan,
+) -> Certificate:
+    """The certified lower bound for a flight of ``length_m`` over ``regions``.
+
+    ``also_m`` is another valid bound of the same problem (the depot's and the disc-packing
+    bounds); the larger of the two is kept, never more than the flight itself.
+    """
+    bound = lower_bound(regions, length_m, time_limit_s)
+    value, method = bound.value, bound.method
+    if also_m > value:
+        value, method = also_m, "geometric"
+    sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
+    return Certificate(min(value, length_m), method, bound.seconds, sectors, area_ratio)
+
+
+def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:
+    """Whether the point may lie in the star: within the reach of its sector or of either
+    neighbour (a point on an edge between two sectors belongs to both)."""
+    dx, dy = xy[0] - star.center_xy[0], xy[1] - star.center_xy[1]
+    n = star.reach_m.size
+    k = math.floor(math.atan2(dy, dx) % (2.0 * math.pi) / (2.0 * math.pi) * n) % n
+    reach = max(float(star.reach_m[j % n]) for j in (k - 1, k, k + 1))
+    return math.hypot(dx, dy) <= reach * (1.0 + 1e-9) + 1e-9
+
+
+def _star_polygon(star: OuterStar) -> Polygon:
+    """A polygon holding the star: each sector's arc replaced by the tangents' corners."""
+    n = star.reach_m.size
+    edges = 2.0 * math.pi * np.arange(n + 1) / n
+    r = np.maximum(star.reach_m, 1e-6) / math.cos(math.pi / n)
+    t = np.column_stack([edges[:-1], edges[1:]]).ravel()
+    rr = np.repeat(r, 2)
+    cx, cy = star.center_xy
+    poly = Polygon(np.column_stack([cx + rr * np.cos(t), cy + rr * np.sin(t)]))
+    if poly.is_valid and poly.area > 0.0:
+        return poly
+    disc: Polygon = shapely.Point(cx, cy).buffer(float(r.max()))
+    return disc
