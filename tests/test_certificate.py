@@ -22,10 +22,12 @@ from conftest import WriteDem
 from independent import check_mission
 from scipy.ndimage import map_coordinates
 
+from urpt_gcs.certificate import outer_regions
 from urpt_gcs.planner import PlanSettings, plan
 from urpt_gcs.products import write_products
 from urpt_gcs.report import flight_quality, summary_text
 from urpt_gcs.solvers import SolveSettings
+from urpt_gcs.solvers.bound import lower_bound
 
 ORIGIN = (500_000.0, 5_200_000.0)
 RES = 0.5
@@ -69,24 +71,41 @@ def _height(z: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where(off, np.nan, v)
 
 
-def _seen_points(z: np.ndarray, altitude: float, step: float) -> list[np.ndarray]:
-    """Per target, the grid points of the plane that see it."""
+def _sees(
+    z: np.ndarray, altitude: float, target: tuple[float, float], eye: np.ndarray
+) -> np.ndarray:
+    """Which eyes on the plane see the target (cone and dense line-of-sight samples)."""
+    tx, ty = target
+    t = np.linspace(0.0, 1.0, 320)[1:]
+    ground = float(_height(z, np.array([tx]), np.array([ty]))[0])
+    d = np.hypot(eye[:, 0] - tx, eye[:, 1] - ty)
+    x = tx + t[None, :] * (eye[:, 0:1] - tx)
+    y = ty + t[None, :] * (eye[:, 1:2] - ty)
+    line = ground + t[None, :] * (altitude - ground)
+    h = _height(z, x, y)
+    inside = d <= (altitude - ground) * math.tan(math.radians(FOV))
+    return inside & np.all(np.isfinite(h) & (h <= line + 1e-6), axis=1)
+
+
+def _seen_points(
+    z: np.ndarray, altitude: float, step: float, hold_m: float = 0.0
+) -> list[np.ndarray]:
+    """Per target, the grid points of the plane that see it (with ``hold_m``: that see it
+    from 48 points of each of two rings around them, of radius ``hold_m`` and half that)."""
     g = np.arange(0.0, N * RES, step) + step / 2
     gx, gy = np.meshgrid(ORIGIN[0] + g, ORIGIN[1] - g)
     eye = np.column_stack([gx.ravel(), gy.ravel()])
-    t = np.linspace(0.0, 1.0, 320)[1:]
+    a = np.linspace(0.0, 2.0 * math.pi, 48, endpoint=False)
+    ring = np.vstack([r * np.column_stack([np.cos(a), np.sin(a)]) for r in (hold_m, hold_m / 2)])
     out = []
     for _, e, s in TARGETS:
-        tx, ty = ORIGIN[0] + e, ORIGIN[1] - s
-        ground = float(_height(z, np.array([tx]), np.array([ty]))[0])
-        d = np.hypot(eye[:, 0] - tx, eye[:, 1] - ty)
-        cand = eye[d <= (altitude - ground) * math.tan(math.radians(FOV))]
-        x = tx + t[None, :] * (cand[:, 0:1] - tx)
-        y = ty + t[None, :] * (cand[:, 1:2] - ty)
-        line = ground + t[None, :] * (altitude - ground)
-        h = _height(z, x, y)
-        ok = np.all(np.isfinite(h) & (h <= line + 1e-6), axis=1)
-        out.append(cand[ok])
+        target = (ORIGIN[0] + e, ORIGIN[1] - s)
+        cand = eye[_sees(z, altitude, target, eye)]
+        if hold_m > 0.0:
+            around = (cand[:, None, :] + ring[None, :, :]).reshape(-1, 2)
+            held = _sees(z, altitude, target, around).reshape(len(cand), len(ring)).all(axis=1)
+            cand = cand[held]
+        out.append(cand)
     return out
 
 
@@ -140,21 +159,36 @@ def test_refinement_shortens_and_every_written_stop_sees_its_targets(
     assert check_mission(dem, out / "mission.waypoints", targets, FOV, min_clearance_m=10.0) == []
 
 
+@pytest.mark.parametrize("hold_m", [0.0, 1.5])
 def test_certified_bound_is_below_a_brute_force_flight(
-    small_site: tuple[Path, Path], tmp_path: Path
+    small_site: tuple[Path, Path], tmp_path: Path, hold_m: float
 ) -> None:
+    # With a position tolerance the bound is for flights whose stops hold it: the brute-force
+    # flight goes through points that see each target from two rings around them.
     dem, csv = small_site
-    result = plan(dem, csv, _settings())
+    result = plan(dem, csv, _settings(position_tolerance_m=hold_m))
     data = write_products(result, tmp_path / "out", with_map=False)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["lower_bound_m"] == data["lower_bound_m"]
     home = np.array([ORIGIN[0] + HOME[0], ORIGIN[1] - HOME[1]])
     # The written altitude is a few centimetres above the plane; the bound is for the plane.
-    sets = _seen_points(_surface(), ALTITUDE, 1.0)
+    sets = _seen_points(_surface(), ALTITUDE, 1.0, hold_m)
     assert all(len(s) > 50 for s in sets)
     brute = _brute_tour(sets, home)
     assert 0.0 < summary["lower_bound_m"] <= brute + 1e-6
-    # The planner's flight is a real flight too: no shorter than the bound.
+    # The planner's flight is a real flight too (its stops hold the tolerance): no shorter
+    # than the bound as found, before the bound is capped at it.
+    # The search stops at the length it is given, so give it ten times the flight.
+    regions, _ = outer_regions(
+        result.terrain,
+        result.targets_xy,
+        result.ground_m,
+        result.camera,
+        result.home_xy,
+        hold_m=hold_m,
+    )
+    free = lower_bound(regions, 10.0 * result.tour.length, 5.0)
+    assert free.value <= result.tour.length + 1e-6
     assert summary["lower_bound_m"] <= summary["tour_length_m"]
     gap = (summary["tour_length_m"] - summary["lower_bound_m"]) / summary["lower_bound_m"]
     assert summary["gap_pct"] >= 100.0 * gap - 1e-9

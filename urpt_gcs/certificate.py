@@ -42,7 +42,9 @@ class Certificate:
     ``lower_bound_m`` bounds every closed flight from ``depot`` (home; none: any closed
     flight) on the plane whose photos see every target; ``method`` and ``seconds`` say how
     the bound was reached, ``area_ratio`` how much wider the outer stars are than what is
-    certainly seen (their areas, summed over the targets).
+    certainly seen (their areas, summed over the targets). ``found_m`` is the bound as
+    found, before it is capped at the flight's length (above it would mean the bound is
+    wrong: the flight is a flight too).
     """
 
     lower_bound_m: float
@@ -50,6 +52,7 @@ class Certificate:
     seconds: float
     sectors: int
     area_ratio: float
+    found_m: float = math.nan
 
     def gap(self, length_m: float) -> float:
         """``(length - bound) / bound``: how much longer the flight may be than the shortest."""
@@ -102,9 +105,15 @@ def outer_regions(
     depot_xy: tuple[float, float] | None,
     workers: int | None = 1,
     max_regions: int = BOUND_MAX_REGIONS,
+    hold_m: float = 0.0,
 ) -> tuple[RegionSet, float]:
     """The targets' outer stars as regions to enter (of at most ``max_regions`` targets far
     apart), home as the depot, and the ratio of the stars' area to what is certainly seen.
+
+    With ``hold_m`` > 0 the regions are where a stop sees its target from anywhere within
+    ``hold_m`` of it (the plan's position tolerance): such a stop ``p`` at angle ``t`` from the
+    star's centre has ``p + hold_m (cos t, sin t)`` seeing too, so ``|p - c| + hold_m`` is within
+    the sector's reach, and every reach shrinks by ``hold_m``.
 
     A target whose star holds home is marked as holding the depot (the bound leaves it out):
     a flight from home may see it without ever crossing its region's edge.
@@ -115,6 +124,9 @@ def outer_regions(
     xy, ground = xy[keep], ground[keep]
     sectors = star_sectors(len(keep))
     outer, inner = star_reach(terrain, xy, ground, camera, sectors, workers)
+    if hold_m > 0.0:
+        outer = np.maximum(outer - hold_m, 0.0)
+        inner = np.minimum(np.maximum(inner - hold_m, 0.0), outer)
     stars = tuple(
         OuterStar((float(x), float(y)), outer[i], inner[i]) for i, (x, y) in enumerate(xy.tolist())
     )
@@ -148,7 +160,7 @@ def certify(
     if also_m > value:
         value, method = also_m, "geometric"
     sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
-    return Certificate(min(value, length_m), method, bound.seconds, sectors, area_ratio)
+    return Certificate(min(value, length_m), method, bound.seconds, sectors, area_ratio, value)
 
 
 def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:

@@ -566,7 +566,9 @@ def finish_plan(
         bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
         stages.say(f"bounding the shortest possible flight (up to {bound_s:.1f} s)")
         flown_m = math.fsum(s.length_m for s in flight.sorties)
-        certificate = _certify(site, area, instance, flown_m, bound_s, settings.workers)
+        certificate = _certify(
+            site, area, instance, flown_m, bound_s, settings.workers, settings.position_tolerance_m
+        )
         stages.lap("bound")
     return Plan(
         settings=settings,
@@ -643,10 +645,18 @@ def _certify(
     flown_m: float,
     time_limit_s: float,
     workers: int | None,
+    hold_m: float,
 ) -> Certificate:
-    """The certified lower bound of every flight from home that sees every target."""
+    """The certified lower bound of every flight from home whose stops see every target from
+    anywhere within ``hold_m`` of them."""
     regions, ratio = outer_regions(
-        area.terrain, site.targets_xy, area.ground_m, area.camera, site.home_xy, workers=workers
+        area.terrain,
+        site.targets_xy,
+        area.ground_m,
+        area.camera,
+        site.home_xy,
+        workers=workers,
+        hold_m=hold_m,
     )
     also = geometric_lower_bound(instance)
     return certify(regions, flown_m, time_limit_s, also, ratio)

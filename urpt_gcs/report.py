@@ -212,6 +212,7 @@ def _bound(plan: Plan) -> dict[str, Any] | None:
         "seconds": round(c.seconds, 3),
         "sectors": c.sectors,
         "outer_to_inner_area": _round(c.area_ratio, 3),
+        "holding_m": plan.settings.position_tolerance_m,
     }
 
 
@@ -360,8 +361,10 @@ def flight_quality(data: dict[str, Any], short: bool = False) -> str:
         return "no lower bound" if short else "no lower bound available"
     if short:
         return f"within {_percent(data['gap_pct'])} % of the shortest possible"
+    holding = (data.get("bound") or {}).get("holding_m") or 0.0
+    over = f" with stops that hold {holding:g} m" if holding > 0.0 else ""
     return (
-        f"within {_percent(data['gap_pct'])} % of the shortest possible flight "
+        f"within {_percent(data['gap_pct'])} % of the shortest possible flight{over} "
         f"(certified lower bound {data['lower_bound_m']:.1f} m)"
     )
 
