@@ -363,6 +363,83 @@ def _reverse(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> N
 
 
 @nb.njit(cache=True)
+def _or_opt(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    d: int,
+    tol: float,
+) -> tuple[int, int]:
+    """Move the two or three stops from disc ``d``'s on, either way round, next to a
+    neighbour of ``d``, if that gains (points fixed); the positions changed (``n, -1`` when
+    it moved nothing)."""
+    n = seq.size
+    i = pos[d]
+    best, best_j, best_len, best_rev = -tol, -2, 0, False
+    for seg in range(2, 4):
+        e = i + seg - 1
+        if e >= n:
+            break
+        ax, ay = _pt(pts, ends, i - 1)
+        bx, by = _pt(pts, ends, e + 1)
+        gain = (
+            _dist(ax, ay, pts[i, 0], pts[i, 1])
+            + _dist(pts[e, 0], pts[e, 1], bx, by)
+            - _dist(ax, ay, bx, by)
+        )
+        if gain <= tol:
+            continue
+        for m in neigh[d]:
+            for j in (pos[m] - 1, pos[m]):
+                if i - 1 <= j <= e:
+                    continue
+                ux, uy = _pt(pts, ends, j)
+                vx, vy = _pt(pts, ends, j + 1)
+                base = _dist(ux, uy, vx, vy)
+                fwd = (
+                    _dist(ux, uy, pts[i, 0], pts[i, 1])
+                    + _dist(pts[e, 0], pts[e, 1], vx, vy)
+                    - base
+                    - gain
+                )
+                rev = (
+                    _dist(ux, uy, pts[e, 0], pts[e, 1])
+                    + _dist(pts[i, 0], pts[i, 1], vx, vy)
+                    - base
+                    - gain
+                )
+                if fwd < best:
+                    best, best_j, best_len, best_rev = fwd, j, seg, False
+                if rev < best:
+                    best, best_j, best_len, best_rev = rev, j, seg, True
+    if best_j == -2:
+        return n, -1
+    e = i + best_len - 1
+    j = best_j
+    # A rotation by three reversals puts the segment after j, in its own orientation.
+    if j > e:
+        _reverse(seq, pts, pos, i, e)
+        _reverse(seq, pts, pos, e + 1, j)
+        _reverse(seq, pts, pos, i, j)
+        lo, hi = j - best_len + 1, j
+        gap = i
+    else:
+        _reverse(seq, pts, pos, j + 1, i - 1)
+        _reverse(seq, pts, pos, i, e)
+        _reverse(seq, pts, pos, j + 1, e)
+        lo, hi = j + 1, j + best_len
+        gap = e + 1
+    if best_rev:
+        _reverse(seq, pts, pos, lo, hi)
+    _settle(seq, pts, discs, ends, lo - 2, hi + 2)
+    _settle(seq, pts, discs, ends, gap - 3, gap + 2)
+    return min(lo, gap) - 3, max(hi, gap) + 3
+
+
+@nb.njit(cache=True)
 def _descend(
     seq: IntArray,
     pts: FloatArray,
@@ -409,6 +486,12 @@ def _descend(
                 _settle(seq, pts, discs, ends, new - 2, new + 2)
                 first = min(first, i - 2, new - 2)
                 last = max(last, i + 2, new + 2)
+                improved = True
+                continue
+            lo, hi = _or_opt(seq, pts, pos, discs, ends, neigh, d, tol)
+            if hi >= lo:
+                first = min(first, lo)
+                last = max(last, hi)
                 improved = True
                 continue
             # 2-opt: the leg out of d's stop against the legs near its neighbours.
