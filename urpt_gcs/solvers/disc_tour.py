@@ -28,11 +28,17 @@ from scipy.spatial import cKDTree
 from urpt_gcs.gtsp import IntArray
 from urpt_gcs.solvers.refine import best_on_disc
 from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility import BoolArray
 
 # Nearest discs considered for a move.
 NEIGHBOURS = 10
+# Positions a random double bridge spans.
+WINDOW = 30
 # Stops kept this far (relative to the radius) inside their disc.
 _INSIDE = 1e-9
+# Newton steps per barrier stage within the search (the exact positions of a whole tour
+# allow more: from a cold start the first stages need them).
+_SEARCH_STEPS = 100
 # Moves must gain at least this fraction of the tour.
 _MIN_GAIN = 1e-9
 
@@ -67,14 +73,21 @@ def path_length(pts: FloatArray, ends: FloatArray) -> float:
 
 @nb.njit(cache=True)
 def _settle(
-    seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, lo: int, hi: int
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    lo: int,
+    hi: int,
+    sweeps: int = 50,
 ) -> float:
-    """Per-stop best moves over positions ``lo..hi`` until they gain nothing; the gain."""
+    """Per-stop best moves over positions ``lo..hi`` until they gain nothing (at most
+    ``sweeps`` sweeps); the gain."""
     n = seq.size
     lo = max(lo, 0)
     hi = min(hi, n - 1)
     total = 0.0
-    for _ in range(200):
+    for _ in range(sweeps):
         gain = 0.0
         for k in range(lo, hi + 1):
             ax, ay = _pt(pts, ends, k - 1)
@@ -123,7 +136,7 @@ def _newton_stage(
     eps: float,
     max_steps: int,
     tol: float,
-) -> None:
+) -> int:
     n = seq.size
     g = np.zeros((n, 2))
     dg = np.zeros((n, 3))  # diagonal blocks: xx, xy, yy
@@ -133,7 +146,9 @@ def _newton_stage(
     step = np.zeros((n, 2))
     trial = np.zeros((n, 2))
     f = _barrier_value(seq, x, discs, ends, mu, eps)
+    steps = 0
     for _ in range(max_steps):
+        steps += 1
         g[:] = 0.0
         dg[:] = 0.0
         off[:] = 0.0
@@ -226,11 +241,12 @@ def _newton_stage(
             t *= 0.5
         if not moved:
             break
+    return steps
 
 
 @nb.njit(cache=True)
 def _exact_kernel(
-    seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray
+    seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, steps: int
 ) -> FloatArray:
     n = seq.size
     length = path_length(pts, ends)
@@ -243,8 +259,8 @@ def _exact_kernel(
         x[k, 1] = discs[i, 1] + (x[k, 1] - discs[i, 1]) * 0.9
     mu = 1e-3 * scale / (n + 1)
     eps = 1e-3 * scale / (n + 1)
-    while mu > 1e-11 * scale / (n + 1):
-        _newton_stage(seq, x, discs, ends, mu, eps, 400, 1e-14 * scale)
+    while mu > 1e-10 * scale / (n + 1):
+        _newton_stage(seq, x, discs, ends, mu, eps, steps, 1e-13 * scale)
         mu *= 0.2
         eps *= 0.2
     # Pull every point a hair inside, as the sweeps keep them.
@@ -256,7 +272,7 @@ def _exact_kernel(
         if d > r:
             x[k, 0] = discs[i, 0] + ex * r / d
             x[k, 1] = discs[i, 1] + ey * r / d
-    _settle(seq, x, discs, ends, 0, n - 1)
+    _settle(seq, x, discs, ends, 0, n - 1, 2)
     return x
 
 
@@ -286,13 +302,19 @@ def exact_positions(
     discs = np.ascontiguousarray(discs, dtype=np.float64)
     depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
     ends = np.ascontiguousarray(np.vstack([depot, depot]))
-    _exact_window(seq, pts, discs, ends, 0, seq.size - 1)
+    _exact_window(seq, pts, discs, ends, 0, seq.size - 1, 400)
     return pts
 
 
 @nb.njit(cache=True)
 def _exact_window(
-    seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, lo: int, hi: int
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    lo: int,
+    hi: int,
+    steps: int = _SEARCH_STEPS,
 ) -> None:
     """Exact positions for the stops ``lo..hi`` (the others fixed), in place, if shorter."""
     n = seq.size
@@ -305,7 +327,7 @@ def _exact_window(
     sub_ends[1, 0], sub_ends[1, 1] = _pt(pts, ends, hi + 1)
     sub_seq = seq[lo : hi + 1]
     sub = pts[lo : hi + 1].copy()
-    x = _exact_kernel(sub_seq, sub, discs, sub_ends)
+    x = _exact_kernel(sub_seq, sub, discs, sub_ends, steps)
     if path_length(x, sub_ends) < path_length(sub, sub_ends):
         pts[lo : hi + 1] = x
 
@@ -440,6 +462,21 @@ def _or_opt(
 
 
 @nb.njit(cache=True)
+def _wake(
+    seq: IntArray, active: BoolArray, queue: IntArray, head: int, size: int, lo: int, hi: int
+) -> int:
+    """Queue the discs at positions ``lo..hi`` not queued yet; the new queue size."""
+    n = seq.size
+    for k in range(max(lo, 0), min(hi, n - 1) + 1):
+        d = seq[k]
+        if not active[d]:
+            active[d] = True
+            queue[(head + size) % n] = d
+            size += 1
+    return size
+
+
+@nb.njit(cache=True)
 def _descend(
     seq: IntArray,
     pts: FloatArray,
@@ -447,85 +484,101 @@ def _descend(
     discs: FloatArray,
     ends: FloatArray,
     neigh: IntArray,
-    max_passes: int,
+    lo: int,
+    hi: int,
 ) -> tuple[int, int]:
-    """Relocate and 2-opt moves until none gains (or ``max_passes`` passes); the first and
-    last positions changed (``n, -1`` when none)."""
+    """Relocate, Or-opt and 2-opt moves until none gains, starting from the discs at
+    positions ``lo..hi`` and then those around each change; the first and last positions
+    changed (``n, -1`` when none)."""
     n = seq.size
     tol = _MIN_GAIN * path_length(pts, ends)
     first, last = n, -1
-    for _ in range(max_passes):
-        improved = False
-        for d in range(n):
-            # Relocate disc d next to one of its neighbours.
-            i = pos[d]
-            ax, ay = _pt(pts, ends, i - 1)
-            bx, by = _pt(pts, ends, i + 1)
-            gain = (
-                _dist(ax, ay, pts[i, 0], pts[i, 1])
-                + _dist(pts[i, 0], pts[i, 1], bx, by)
-                - _dist(ax, ay, bx, by)
-            )
-            best, best_j, best_x, best_y = -tol, -2, 0.0, 0.0
-            if gain > tol:
-                for m in neigh[d]:
-                    for j in (pos[m] - 1, pos[m]):
-                        # The slots either side of the stop itself are where it is now.
-                        if j == i or j == i - 1:
-                            continue
-                        cost, px, py = _insert_cost(pts, ends, discs, d, j)
-                        delta = cost - gain
-                        if delta < best:
-                            best, best_j, best_x, best_y = delta, j, px, py
-            if best_j > -2:
-                pts[i, 0] = best_x
-                pts[i, 1] = best_y
-                new = _move_stop(seq, pts, pos, i, best_j)
-                old_near = i if i < new else i + 1
-                _settle(seq, pts, discs, ends, old_near - 2, old_near + 1)
-                _settle(seq, pts, discs, ends, new - 2, new + 2)
-                first = min(first, i - 2, new - 2)
-                last = max(last, i + 2, new + 2)
-                improved = True
-                continue
-            lo, hi = _or_opt(seq, pts, pos, discs, ends, neigh, d, tol)
-            if hi >= lo:
-                first = min(first, lo)
-                last = max(last, hi)
-                improved = True
-                continue
-            # 2-opt: the leg out of d's stop against the legs near its neighbours.
+    active = np.zeros(n, dtype=np.bool_)
+    queue = np.empty(n, dtype=np.int64)
+    head = 0
+    size = _wake(seq, active, queue, head, 0, lo, hi)
+    budget = 200 * n
+    while size > 0 and budget > 0:
+        budget -= 1
+        d = queue[head]
+        head = (head + 1) % n
+        size -= 1
+        active[d] = False
+        # Relocate disc d next to one of its neighbours.
+        i = pos[d]
+        ax, ay = _pt(pts, ends, i - 1)
+        bx, by = _pt(pts, ends, i + 1)
+        gain = (
+            _dist(ax, ay, pts[i, 0], pts[i, 1])
+            + _dist(pts[i, 0], pts[i, 1], bx, by)
+            - _dist(ax, ay, bx, by)
+        )
+        best, best_j, best_x, best_y = -tol, -2, 0.0, 0.0
+        if gain > tol:
             for m in neigh[d]:
-                i = pos[d]
-                j = pos[m]
-                for side in range(2):
-                    if side == 0:
-                        a, b = i, j  # legs (a, a+1) and (b, b+1) become (a, b), (a+1, b+1)
-                    else:
-                        a, b = i - 1, j - 1  # legs into d and into m
-                    lo, hi = min(a, b), max(a, b)
-                    if hi - lo < 2 or lo < -1 or hi > n - 1:
+                for j in (pos[m] - 1, pos[m]):
+                    # The slots either side of the stop itself are where it is now.
+                    if j == i or j == i - 1:
                         continue
-                    p0x, p0y = _pt(pts, ends, lo)
-                    p1x, p1y = _pt(pts, ends, lo + 1)
-                    q0x, q0y = _pt(pts, ends, hi)
-                    q1x, q1y = _pt(pts, ends, hi + 1)
-                    delta = (
-                        _dist(p0x, p0y, q0x, q0y)
-                        + _dist(p1x, p1y, q1x, q1y)
-                        - _dist(p0x, p0y, p1x, p1y)
-                        - _dist(q0x, q0y, q1x, q1y)
-                    )
-                    if delta < -tol:
-                        _reverse(seq, pts, pos, lo + 1, hi)
-                        _settle(seq, pts, discs, ends, lo - 1, lo + 2)
-                        _settle(seq, pts, discs, ends, hi - 1, hi + 2)
-                        first = min(first, lo - 1)
-                        last = max(last, hi + 2)
-                        improved = True
-                        break
-        if not improved:
-            break
+                    cost, px, py = _insert_cost(pts, ends, discs, d, j)
+                    delta = cost - gain
+                    if delta < best:
+                        best, best_j, best_x, best_y = delta, j, px, py
+        if best_j > -2:
+            pts[i, 0] = best_x
+            pts[i, 1] = best_y
+            new = _move_stop(seq, pts, pos, i, best_j)
+            old_near = i if i < new else i + 1
+            _settle(seq, pts, discs, ends, old_near - 2, old_near + 1)
+            _settle(seq, pts, discs, ends, new - 2, new + 2)
+            first = min(first, i - 2, new - 2)
+            last = max(last, i + 2, new + 2)
+            size = _wake(seq, active, queue, head, size, old_near - 2, old_near + 1)
+            size = _wake(seq, active, queue, head, size, new - 2, new + 2)
+            continue
+        a, b = _or_opt(seq, pts, pos, discs, ends, neigh, d, tol)
+        if b >= a:
+            first = min(first, a)
+            last = max(last, b)
+            size = _wake(seq, active, queue, head, size, a, a + 6)
+            size = _wake(seq, active, queue, head, size, b - 6, b)
+            size = _wake(seq, active, queue, head, size, pos[d] - 2, pos[d] + 4)
+            continue
+        # 2-opt: the leg out of d's stop against the legs near its neighbours.
+        done = False
+        for m in neigh[d]:
+            if done:
+                break
+            i = pos[d]
+            j = pos[m]
+            for side in range(2):
+                if side == 0:
+                    a, b = i, j  # legs (a, a+1) and (b, b+1) become (a, b), (a+1, b+1)
+                else:
+                    a, b = i - 1, j - 1  # legs into d and into m
+                lo2, hi2 = min(a, b), max(a, b)
+                if hi2 - lo2 < 2 or lo2 < -1 or hi2 > n - 1:
+                    continue
+                p0x, p0y = _pt(pts, ends, lo2)
+                p1x, p1y = _pt(pts, ends, lo2 + 1)
+                q0x, q0y = _pt(pts, ends, hi2)
+                q1x, q1y = _pt(pts, ends, hi2 + 1)
+                delta = (
+                    _dist(p0x, p0y, q0x, q0y)
+                    + _dist(p1x, p1y, q1x, q1y)
+                    - _dist(p0x, p0y, p1x, p1y)
+                    - _dist(q0x, q0y, q1x, q1y)
+                )
+                if delta < -tol:
+                    _reverse(seq, pts, pos, lo2 + 1, hi2)
+                    _settle(seq, pts, discs, ends, lo2 - 1, lo2 + 2)
+                    _settle(seq, pts, discs, ends, hi2 - 1, hi2 + 2)
+                    first = min(first, lo2 - 1)
+                    last = max(last, hi2 + 2)
+                    size = _wake(seq, active, queue, head, size, lo2 - 1, lo2 + 2)
+                    size = _wake(seq, active, queue, head, size, hi2 - 1, hi2 + 2)
+                    done = True
+                    break
     return first, last
 
 
@@ -596,15 +649,16 @@ def improve(
     best_seq, best_pts = seq.copy(), pts.copy()
     best_len = path_length(pts, ends)
     rng = np.random.default_rng(seed)
-    window = min(n, 30)
+    window = min(n, WINDOW)
     while n >= 4 and time.perf_counter() - started < time_limit_s:
         start = int(rng.integers(0, n - window + 1))
         a, b, c = np.sort(rng.choice(window, 3, replace=False)) + start + 1
         _kick(seq, pts, pos, int(a), int(b), int(c))
         _descent(seq, pts, pos, discs, ends, neigh, a - 10, c + 10)
         length = path_length(pts, ends)
-        if length < best_len - 1e-12 * best_len:
-            best_len = length
+        # Ties are taken too: they let the search drift across plateaus.
+        if length <= best_len * (1.0 + 1e-12):
+            best_len = min(length, best_len)
             best_seq[:] = seq
             best_pts[:] = pts
         else:
@@ -627,13 +681,16 @@ def _descent(
     lo: int,
     hi: int,
 ) -> None:
-    """Local search to a local optimum, the positions exact around ``lo..hi`` and at the end."""
-    _exact_window(seq, pts, discs, ends, lo - 5, hi + 5)
+    """Local search to a local optimum from the stops ``lo..hi`` on, the positions exact
+    around them and around every change."""
+    a, b = lo - 5, hi + 5
+    _exact_window(seq, pts, discs, ends, a, b)
     for _ in range(20):
         before = path_length(pts, ends)
-        first, last = _descend(seq, pts, pos, discs, ends, neigh, 1000)
+        first, last = _descend(seq, pts, pos, discs, ends, neigh, a, b)
         if last < first:
             break
-        _exact_window(seq, pts, discs, ends, first - 5, last + 5)
+        a, b = first - 5, last + 5
+        _exact_window(seq, pts, discs, ends, a, b)
         if path_length(pts, ends) >= before * (1.0 - 1e-12):
             break
