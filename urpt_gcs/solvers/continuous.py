@@ -29,8 +29,11 @@ from urpt_gcs.solvers.refine import closed_length, refine_touches
 from urpt_gcs.solvers.regions import RegionSet
 from urpt_gcs.terrain import FloatArray
 
-# Boundary samples per region.
+# Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
+# _MIN_DISC_SAMPLES each).
 SAMPLES = 24
+_DISC_SAMPLE_BUDGET = 2400
+_MIN_DISC_SAMPLES = 4
 # Fraction of the time limit for the bound; the rest goes to solving and re-solving.
 _BOUND_SHARE = 0.3
 # Re-solves after the first solve (polygons).
@@ -129,7 +132,7 @@ def solve_regions(
     solver
         The GTSP solver for the candidate points (see :func:`urpt_gcs.solvers.solve`).
     samples
-        Boundary candidates per region.
+        Boundary candidates per region (for many discs fewer, see ``_DISC_SAMPLE_BUDGET``).
     gap_target
         The bound stops refining its pieces once the gap is below this.
 
@@ -141,6 +144,10 @@ def solve_regions(
     settings = settings or SolveSettings()
     started = time.perf_counter()
     solve_budget = settings.time_limit_s * (1.0 - _BOUND_SHARE)
+    if regions.discs is not None:
+        # Fewer candidates on many discs: the order search does better from a tour the
+        # GTSP solver could search well than from one over too many candidates.
+        samples = max(_MIN_DISC_SAMPLES, min(samples, _DISC_SAMPLE_BUDGET // regions.n))
     base_xy, _ = regions.samples(samples)
     instance = regions.instance(base_xy)
     with_discs = regions.discs is not None

@@ -34,6 +34,9 @@ from urpt_gcs.visibility import BoolArray
 NEIGHBOURS = 10
 # Positions a random double bridge spans.
 WINDOW = 30
+# Share of the kicks that take a disc and its neighbours out and put them back greedily
+# (the others are double bridges).
+_RUIN_SHARE = 0.5
 # Stops kept this far (relative to the radius) inside their disc.
 _INSIDE = 1e-9
 # Newton steps per barrier stage within the search (the exact positions of a whole tour
@@ -602,6 +605,51 @@ def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int)
         pos[seq[k]] = k
 
 
+@nb.njit(cache=True)
+def _ruin(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    removed: IntArray,
+) -> tuple[int, int]:
+    """Take the discs ``removed`` out of the tour and put each back (in the order given) at
+    its cheapest place, its point the best there; the first and last positions changed."""
+    n = seq.size
+    out = np.zeros(n, dtype=np.bool_)
+    for d in removed:
+        out[d] = True
+    m = 0
+    for k in range(n):
+        if not out[seq[k]]:
+            seq[m] = seq[k]
+            pts[m, 0] = pts[k, 0]
+            pts[m, 1] = pts[k, 1]
+            m += 1
+    first, last = n, -1
+    for d in removed:
+        cur = pts[:m]
+        best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
+        for j in range(-1, m):
+            cost, px, py = _insert_cost(cur, ends, discs, d, j)
+            if cost < best:
+                best, best_j, best_x, best_y = cost, j, px, py
+        for k in range(m, best_j + 1, -1):
+            seq[k] = seq[k - 1]
+            pts[k, 0] = pts[k - 1, 0]
+            pts[k, 1] = pts[k - 1, 1]
+        seq[best_j + 1] = d
+        pts[best_j + 1, 0] = best_x
+        pts[best_j + 1, 1] = best_y
+        m += 1
+        first = min(first, best_j + 1)
+        last = max(last, best_j + 1)
+    for k in range(n):
+        pos[seq[k]] = k
+    return first, last
+
+
 def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
     """Each disc's ``k`` nearest discs by the gap between them (rims, not centres)."""
     n = len(discs)
@@ -651,10 +699,17 @@ def improve(
     rng = np.random.default_rng(seed)
     window = min(n, WINDOW)
     while n >= 4 and time.perf_counter() - started < time_limit_s:
-        start = int(rng.integers(0, n - window + 1))
-        a, b, c = np.sort(rng.choice(window, 3, replace=False)) + start + 1
-        _kick(seq, pts, pos, int(a), int(b), int(c))
-        _descent(seq, pts, pos, discs, ends, neigh, a - 10, c + 10)
+        if rng.random() < _RUIN_SHARE:
+            centre = int(rng.integers(n))
+            k = int(rng.integers(2, neigh.shape[1] + 1))
+            removed = rng.permutation(np.append(neigh[centre, :k], centre))
+            lo, hi = _ruin(seq, pts, pos, discs, ends, removed)
+            _descent(seq, pts, pos, discs, ends, neigh, lo - 10, hi + 10)
+        else:
+            start = int(rng.integers(0, n - window + 1))
+            a, b, c = np.sort(rng.choice(window, 3, replace=False)) + start + 1
+            _kick(seq, pts, pos, int(a), int(b), int(c))
+            _descent(seq, pts, pos, discs, ends, neigh, a - 10, c + 10)
         length = path_length(pts, ends)
         # Ties are taken too: they let the search drift across plateaus.
         if length <= best_len * (1.0 + 1e-12):
