@@ -204,3 +204,16 @@ def test_proven_optima_are_matched(name: str) -> None:
     assert published.best_known * (1 - 1e-5) <= length <= published.best_known * 1.0001
     assert tour.lower_bound <= published.best_known * (1 + 1e-4)
     assert length <= tour.discrete_length + 1e-9
+
+
+def test_a_disc_tour_without_depot_touches_every_disc() -> None:
+    rng = np.random.default_rng(8)
+    n = 30
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(2, 6, n)])
+    regions = RegionSet(discs=discs)
+    tour = solve_regions(regions, SolveSettings(time_limit_s=2.0))
+    ring = np.asarray(tour.points_xy)
+    assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
+    length = float(np.hypot(*np.diff(np.vstack([ring, ring[:1]]), axis=0).T).sum())
+    assert abs(length - tour.length) <= 1e-9 * length
+    assert length <= tour.discrete_length + 1e-9

@@ -674,22 +674,26 @@ def improve(
     time_limit_s: float,
     seed: int = 0,
 ) -> tuple[IntArray, FloatArray]:
-    """A shorter tour through every disc from a given one, by iterated local search.
+    """A shorter tour through the discs of ``seq`` from a given one, by iterated local search.
 
-    ``seq`` holds every disc once; ``pts`` a point in each. Runs for about ``time_limit_s``
-    and returns the best order and points found (never longer than the start).
+    ``seq`` holds discs (rows of ``discs``, each once); ``pts`` a point in each. Runs for
+    about ``time_limit_s`` and returns the best order and points found (never longer than
+    the start).
     """
     started = time.perf_counter()
-    discs = np.ascontiguousarray(discs, dtype=np.float64)
+    # The search numbers the discs of the tour 0..n-1 in their starting order: ``seq`` may
+    # hold only some of ``discs``.
+    ids = np.array(seq, dtype=np.int64)
+    discs = np.ascontiguousarray(np.asarray(discs, dtype=np.float64)[ids])
     depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
     ends = np.ascontiguousarray(np.vstack([depot, depot]))
-    seq = np.array(seq, dtype=np.int64)
+    seq = np.arange(ids.size, dtype=np.int64)
     pts = np.array(pts, dtype=np.float64).reshape(-1, 2)
     n = seq.size
     start_len = path_length(pts, ends)
     start_seq, start_pts = seq.copy(), pts.copy()
     if n < 2:
-        return seq, exact_positions(seq, pts, discs, depot)
+        return ids, exact_positions(seq, pts, discs, depot)
     pos = np.empty(n, dtype=np.int64)
     pos[seq] = np.arange(n)
     neigh = neighbours(discs)
@@ -721,8 +725,8 @@ def improve(
             pts[:] = best_pts
             pos[seq] = np.arange(n)
     if best_len >= start_len:
-        return start_seq, start_pts
-    return best_seq, best_pts
+        return ids[start_seq], start_pts
+    return ids[best_seq], best_pts
 
 
 @nb.njit(cache=True)
