@@ -37,6 +37,9 @@ WINDOW = 30
 # Share of the kicks that take a disc and its neighbours out and put them back greedily
 # (the others are double bridges).
 _RUIN_SHARE = 0.5
+# Share of the kicks after which the search also runs on the stops alone, the discs their
+# legs cross anyway taken out and put back after.
+_STRIP_SHARE = 0.3
 # Stops kept this far (relative to the radius) inside their disc.
 _INSIDE = 1e-9
 # Newton steps per barrier stage within the search (the exact positions of a whole tour
@@ -418,6 +421,8 @@ def _or_opt(
         if gain <= tol:
             continue
         for m in neigh[d]:
+            if pos[m] < 0:
+                continue
             for j in (pos[m] - 1, pos[m]):
                 if i - 1 <= j <= e:
                     continue
@@ -474,7 +479,7 @@ def _wake(
         d = seq[k]
         if not active[d]:
             active[d] = True
-            queue[(head + size) % n] = d
+            queue[(head + size) % queue.size] = d
             size += 1
     return size
 
@@ -496,15 +501,16 @@ def _descend(
     n = seq.size
     tol = _MIN_GAIN * path_length(pts, ends)
     first, last = n, -1
-    active = np.zeros(n, dtype=np.bool_)
-    queue = np.empty(n, dtype=np.int64)
+    # Indexed by disc: the tour may hold only some of them (the others stripped).
+    active = np.zeros(pos.size, dtype=np.bool_)
+    queue = np.empty(pos.size, dtype=np.int64)
     head = 0
     size = _wake(seq, active, queue, head, 0, lo, hi)
     budget = 200 * n
     while size > 0 and budget > 0:
         budget -= 1
         d = queue[head]
-        head = (head + 1) % n
+        head = (head + 1) % queue.size
         size -= 1
         active[d] = False
         # Relocate disc d next to one of its neighbours.
@@ -519,6 +525,8 @@ def _descend(
         best, best_j, best_x, best_y = -tol, -2, 0.0, 0.0
         if gain > tol:
             for m in neigh[d]:
+                if pos[m] < 0:
+                    continue
                 for j in (pos[m] - 1, pos[m]):
                     # The slots either side of the stop itself are where it is now.
                     if j == i or j == i - 1:
@@ -552,6 +560,8 @@ def _descend(
         for m in neigh[d]:
             if done:
                 break
+            if pos[m] < 0:
+                continue
             i = pos[d]
             j = pos[m]
             for side in range(2):
@@ -650,6 +660,68 @@ def _ruin(
     return first, last
 
 
+@nb.njit(cache=True)
+def _strip(
+    seq: IntArray, pts: FloatArray, pos: IntArray, ends: FloatArray, tol: float
+) -> tuple[int, IntArray]:
+    """Take out every stop that lies on the leg between its neighbours (its disc is touched
+    by that leg anyway); the stops left come first. The count left, and the discs taken."""
+    n = seq.size
+    taken = np.empty(n, dtype=np.int64)
+    t = 0
+    m = 0
+    for k in range(n):
+        ax, ay = _pt(pts[:m], ends, m - 1)
+        bx, by = _pt(pts, ends, k + 1)
+        gain = (
+            _dist(ax, ay, pts[k, 0], pts[k, 1])
+            + _dist(pts[k, 0], pts[k, 1], bx, by)
+            - _dist(ax, ay, bx, by)
+        )
+        if gain <= tol:
+            taken[t] = seq[k]
+            pos[seq[k]] = -1
+            t += 1
+        else:
+            seq[m] = seq[k]
+            pts[m, 0] = pts[k, 0]
+            pts[m, 1] = pts[k, 1]
+            pos[seq[m]] = m
+            m += 1
+    return m, taken[:t].copy()
+
+
+@nb.njit(cache=True)
+def _put_back(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    m: int,
+    taken: IntArray,
+) -> None:
+    """Put the discs ``taken`` back into the tour of the first ``m`` stops, each at its
+    cheapest place (free where a leg already crosses it)."""
+    for d in taken:
+        cur = pts[:m]
+        best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
+        for j in range(-1, m):
+            cost, px, py = _insert_cost(cur, ends, discs, d, j)
+            if cost < best:
+                best, best_j, best_x, best_y = cost, j, px, py
+        for k in range(m, best_j + 1, -1):
+            seq[k] = seq[k - 1]
+            pts[k, 0] = pts[k - 1, 0]
+            pts[k, 1] = pts[k - 1, 1]
+        seq[best_j + 1] = d
+        pts[best_j + 1, 0] = best_x
+        pts[best_j + 1, 1] = best_y
+        m += 1
+    for k in range(m):
+        pos[seq[k]] = k
+
+
 def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
     """Each disc's ``k`` nearest discs by the gap between them (rims, not centres)."""
     n = len(discs)
@@ -714,6 +786,14 @@ def improve(
             a, b, c = np.sort(rng.choice(window, 3, replace=False)) + start + 1
             _kick(seq, pts, pos, int(a), int(b), int(c))
             _descent(seq, pts, pos, discs, ends, neigh, a - 10, c + 10)
+        if rng.random() < _STRIP_SHARE:
+            # Search over the stops that matter, then put the others back.
+            tol = _MIN_GAIN * path_length(pts, ends)
+            m, taken = _strip(seq, pts, pos, ends, tol)
+            if m >= 4:
+                _descend(seq[:m], pts[:m], pos, discs, ends, neigh, 0, m - 1)
+            _put_back(seq, pts, pos, discs, ends, m, taken)
+            _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
         length = path_length(pts, ends)
         # Ties are taken too: they let the search drift across plateaus.
         if length <= best_len * (1.0 + 1e-12):
