@@ -160,6 +160,8 @@ def test_exact_positions_match_an_independent_convex_solve() -> None:
         n = 8
         centres = np.cumsum(rng.uniform(-3, 3, (n, 2)), axis=0) + 10.0
         discs = np.column_stack([centres, rng.uniform(1.5, 3.5, n)])
+        if trial == 2:
+            discs[3, 2] = 0.0  # a point to pass through
         seq = rng.permutation(n) if trial % 2 else np.arange(n)
         depot = np.asarray([0.0, 0.0])
         got = exact_positions(seq, discs[seq, :2].copy(), discs, depot)

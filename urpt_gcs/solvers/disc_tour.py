@@ -322,12 +322,33 @@ def _exact_window(
     hi: int,
     steps: int = _SEARCH_STEPS,
 ) -> None:
-    """Exact positions for the stops ``lo..hi`` (the others fixed), in place, if shorter."""
+    """Exact positions for the stops ``lo..hi`` (the others fixed), in place, if shorter.
+
+    A disc of radius 0 pins its stop (the barrier needs an inside): the runs between pinned
+    stops are solved each on its own."""
     n = seq.size
     lo = max(lo, 0)
     hi = min(hi, n - 1)
     if hi < lo:
         return
+    start = lo
+    for k in range(lo, hi + 2):
+        if k > hi or discs[seq[k], 2] <= 0.0:
+            if k > start:
+                _exact_run(seq, pts, discs, ends, start, k - 1, steps)
+            start = k + 1
+
+
+@nb.njit(cache=True)
+def _exact_run(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    lo: int,
+    hi: int,
+    steps: int,
+) -> None:
     sub_ends = np.empty((2, 2))
     sub_ends[0, 0], sub_ends[0, 1] = _pt(pts, ends, lo - 1)
     sub_ends[1, 0], sub_ends[1, 1] = _pt(pts, ends, hi + 1)
