@@ -5,12 +5,17 @@ from __future__ import annotations
 import csv
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
+from conftest import CETSP, needs_shared
+from scipy.optimize import minimize
+from shapely.geometry import LineString, Point
 
-from urpt_gcs.bench.cetsp import COLUMNS
+from urpt_gcs.bench.cetsp import COLUMNS, read_instance, read_published
 from urpt_gcs.cli import main
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import solve_regions
+from urpt_gcs.solvers.disc_tour import exact_positions, improve
 from urpt_gcs.solvers.refine import best_on_disc, closed_length, refine_touches
 from urpt_gcs.solvers.regions import RegionSet
 
@@ -99,3 +104,118 @@ def test_bench_cetsp_refuses_a_folder_without_instances(tmp_path) -> None:  # ty
     result = CliRunner().invoke(main, ["bench", "cetsp", str(tmp_path)])
     assert result.exit_code == 1
     assert "instances/" in result.output and "Traceback" not in result.output
+
+
+def _polyline_distance(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Each centre's distance to the closed polyline through ``points`` (shapely, not ours)."""
+    ring = LineString(np.vstack([points, points[:1]]))
+    return np.asarray([ring.distance(Point(*c)) for c in centres])
+
+
+def _fixed_order_optimum(seq: np.ndarray, discs: np.ndarray, depot: np.ndarray) -> float:
+    """The fixed-order problem solved by scipy's SLSQP from the centres, as a check."""
+    c, r = discs[seq, :2], discs[seq, 2]
+
+    def legs(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = np.diff(np.vstack([depot, z.reshape(-1, 2), depot]), axis=0)
+        return d, np.sqrt((d**2).sum(axis=1) + 1e-18)
+
+    def length(z: np.ndarray) -> float:
+        return float(legs(z)[1].sum())
+
+    def grad(z: np.ndarray) -> np.ndarray:
+        d, s = legs(z)
+        u = d / s[:, None]
+        return (u[:-1] - u[1:]).ravel()
+
+    def inside(z: np.ndarray) -> np.ndarray:
+        return r**2 - ((z.reshape(-1, 2) - c) ** 2).sum(axis=1)
+
+    def inside_jac(z: np.ndarray) -> np.ndarray:
+        e = z.reshape(-1, 2) - c
+        jac = np.zeros((len(c), 2 * len(c)))
+        jac[np.arange(len(c)), 2 * np.arange(len(c))] = -2 * e[:, 0]
+        jac[np.arange(len(c)), 2 * np.arange(len(c)) + 1] = -2 * e[:, 1]
+        return jac
+
+    cons = {"type": "ineq", "fun": inside, "jac": inside_jac}
+    res = minimize(
+        length,
+        c.ravel(),
+        jac=grad,
+        method="SLSQP",
+        constraints=[cons],
+        tol=1e-12,
+        options={"maxiter": 200},
+    )
+    assert (inside(res.x) >= -1e-9).all()
+    return float(res.fun)
+
+
+def test_exact_positions_match_an_independent_convex_solve() -> None:
+    # A chain of overlapping discs: the best tour enters lenses where consecutive stops
+    # coincide, where moving one stop at a time stalls.
+    rng = np.random.default_rng(3)
+    for trial in range(3):
+        n = 8
+        centres = np.cumsum(rng.uniform(-3, 3, (n, 2)), axis=0) + 10.0
+        discs = np.column_stack([centres, rng.uniform(1.5, 3.5, n)])
+        if trial == 2:
+            discs[3, 2] = 0.0  # a point to pass through
+        seq = rng.permutation(n) if trial % 2 else np.arange(n)
+        depot = np.asarray([0.0, 0.0])
+        got = exact_positions(seq, discs[seq, :2].copy(), discs, depot)
+        assert (np.hypot(*(got - discs[seq, :2]).T) <= discs[seq, 2]).all()
+        length = closed_length(got, (0.0, 0.0))
+        swept = refine_touches(RegionSet(discs=discs, depot_xy=(0.0, 0.0)), seq, discs[seq, :2])
+        reference = _fixed_order_optimum(seq, discs, depot)
+        assert length <= reference + 1e-6 * reference
+        assert length <= closed_length(swept, (0.0, 0.0)) + 1e-9
+
+
+def test_order_search_touches_every_disc_and_never_lengthens() -> None:
+    rng = np.random.default_rng(5)
+    n = 60
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(1, 8, n)])
+    depot = np.asarray([50.0, 50.0])
+    seq = rng.permutation(n)  # a poor start: a random order through the centres
+    start = discs[seq, :2].copy()
+    got_seq, got = improve(seq, start, discs, depot, time_limit_s=1.0)
+    assert sorted(got_seq.tolist()) == list(range(n))
+    tour = np.vstack([depot, got])
+    # Every disc is touched by the closed tour: by its own stop or by a leg crossing it.
+    assert (_polyline_distance(tour, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9) + 1e-9).all()
+    length = float(np.hypot(*np.diff(np.vstack([tour, tour[:1]]), axis=0).T).sum())
+    assert length < closed_length(start, tuple(depot)) * 0.5  # random orders are long
+
+
+@needs_shared("bench/cetsp")
+@pytest.mark.parametrize("name", ["concentricCircles1", "rotatingDiamonds1", "bubbles1"])
+def test_proven_optima_are_matched(name: str) -> None:
+    published = read_published(CETSP)[name]
+    assert published.proven_optimal and published.best_known is not None
+    regions = read_instance(CETSP / "instances" / f"{name}.txt")
+    tour = solve_regions(regions, SolveSettings(time_limit_s=3.0))
+    assert regions.depot_xy is not None and regions.discs is not None
+    ring = np.vstack([regions.depot_xy, tour.points_xy])
+    gaps = _polyline_distance(ring, regions.discs[:, :2]) - regions.discs[:, 2]
+    assert gaps.max() <= 1e-7
+    length = float(np.hypot(*np.diff(np.vstack([ring, ring[:1]]), axis=0).T).sum())
+    assert abs(length - tour.length) <= 1e-9 * length
+    # Within 0.01 % of the proven optimum; below it only by the file's rounding.
+    assert published.best_known * (1 - 1e-5) <= length <= published.best_known * 1.0001
+    assert tour.lower_bound <= published.best_known * (1 + 1e-4)
+    assert length <= tour.discrete_length + 1e-9
+
+
+def test_a_disc_tour_without_depot_touches_every_disc() -> None:
+    rng = np.random.default_rng(8)
+    n = 30
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(2, 6, n)])
+    regions = RegionSet(discs=discs)
+    tour = solve_regions(regions, SolveSettings(time_limit_s=2.0))
+    ring = np.asarray(tour.points_xy)
+    assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
+    length = float(np.hypot(*np.diff(np.vstack([ring, ring[:1]]), axis=0).T).sum())
+    assert abs(length - tour.length) <= 1e-9 * length
+    assert length <= tour.discrete_length + 1e-9

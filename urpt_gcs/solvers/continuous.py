@@ -22,19 +22,26 @@ import numpy as np
 
 from urpt_gcs.errors import PlanError
 from urpt_gcs.gtsp import Instance, IntArray
-from urpt_gcs.solvers import solve
+from urpt_gcs.solvers import disc_tour, solve
 from urpt_gcs.solvers.base import SolveSettings, Tour
 from urpt_gcs.solvers.bound import Bound, lower_bound
 from urpt_gcs.solvers.refine import closed_length, refine_touches
 from urpt_gcs.solvers.regions import RegionSet
 from urpt_gcs.terrain import FloatArray
 
-# Boundary samples per region.
+# Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
+# _MIN_DISC_SAMPLES each).
 SAMPLES = 24
+_DISC_SAMPLE_BUDGET = 2400
+_MIN_DISC_SAMPLES = 4
 # Fraction of the time limit for the bound; the rest goes to solving and re-solving.
 _BOUND_SHARE = 0.3
-# Re-solves after the first solve.
+# Re-solves after the first solve (polygons).
 _ROUNDS = 3
+# For discs: re-solves, and the share of the solve time for the discrete solves; the
+# continuous order search (:mod:`urpt_gcs.solvers.disc_tour`) has the rest.
+_DISC_ROUNDS = 2
+_DISC_DISCRETE_SHARE = 0.5
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 
@@ -125,7 +132,7 @@ def solve_regions(
     solver
         The GTSP solver for the candidate points (see :func:`urpt_gcs.solvers.solve`).
     samples
-        Boundary candidates per region.
+        Boundary candidates per region (for many discs fewer, see ``_DISC_SAMPLE_BUDGET``).
     gap_target
         The bound stops refining its pieces once the gap is below this.
 
@@ -137,24 +144,37 @@ def solve_regions(
     settings = settings or SolveSettings()
     started = time.perf_counter()
     solve_budget = settings.time_limit_s * (1.0 - _BOUND_SHARE)
+    if regions.discs is not None:
+        # Fewer candidates on many discs: the order search does better from a tour the
+        # GTSP solver could search well than from one over too many candidates.
+        samples = max(_MIN_DISC_SAMPLES, min(samples, _DISC_SAMPLE_BUDGET // regions.n))
     base_xy, _ = regions.samples(samples)
     instance = regions.instance(base_xy)
-    first = solve(instance, solver, _share(settings, solve_budget / (_ROUNDS + 1)))
+    with_discs = regions.discs is not None
+    rounds = _DISC_ROUNDS if with_discs else _ROUNDS
+    discrete_budget = solve_budget * (_DISC_DISCRETE_SHARE if with_discs else 1.0)
+    first = solve(instance, solver, _share(settings, discrete_budget / (rounds + 1)))
     discrete = first.length
     seq, pts = touches(instance, first)
-    pts = refine_touches(regions, seq, pts)
+    pts = _refine(regions, seq, pts)
     best_len = closed_length(pts, regions.depot_xy)
     best_seq, best_pts = seq, pts
-    for round_ in range(_ROUNDS):
-        left = solve_budget - (time.perf_counter() - started)
+    for round_ in range(rounds):
+        left = discrete_budget - (time.perf_counter() - started)
         if left <= 0.05:
             break
         extra = np.vstack([best_pts, _near_samples(regions, best_seq, best_pts)])
         inst = regions.instance(np.vstack([base_xy, extra]))
-        rounds_left = _ROUNDS - round_
+        rounds_left = rounds - round_
         tour = solve(inst, solver, _share(settings, left / rounds_left, seed_offset=round_ + 1))
         seq, pts = touches(inst, tour)
-        pts = refine_touches(regions, seq, pts)
+        pts = _refine(regions, seq, pts)
+        length = closed_length(pts, regions.depot_xy)
+        if length < best_len:
+            best_len, best_seq, best_pts = length, seq, pts
+    if with_discs:
+        left = solve_budget - (time.perf_counter() - started)
+        seq, pts = _search_discs(regions, best_seq, best_pts, left, settings.seed)
         length = closed_length(pts, regions.depot_xy)
         if length < best_len:
             best_len, best_seq, best_pts = length, seq, pts
@@ -175,6 +195,46 @@ def solve_regions(
         optimal_over_candidates=first.proven_optimal,
         solve_s=time.perf_counter() - started,
     )
+
+
+def _refine(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
+    """Stops moved within their regions, the order fixed: per-stop moves, and for discs
+    around a depot the exact positions (which per-stop moves approach only slowly)."""
+    pts = refine_touches(regions, seq, pts)
+    if regions.discs is None or regions.depot_xy is None:
+        return pts
+    exact = disc_tour.exact_positions(seq, pts, regions.discs, np.asarray(regions.depot_xy))
+    if closed_length(exact, regions.depot_xy) < closed_length(pts, regions.depot_xy):
+        return exact
+    return pts
+
+
+def _search_discs(
+    regions: RegionSet, seq: IntArray, pts: FloatArray, seconds: float, seed: int
+) -> tuple[IntArray, FloatArray]:
+    """The disc tour improved by the continuous order search (:mod:`disc_tour`).
+
+    Without a depot the tour is searched twice, each time from a stop held fixed in place of
+    the depot: first the first stop, then the one half way round, so that both move once.
+    """
+    assert regions.discs is not None
+    discs = regions.discs
+    # A disc touched twice keeps its first touch.
+    _, first = np.unique(seq, return_index=True)
+    keep = np.sort(first)
+    seq, pts = np.asarray(seq)[keep], np.asarray(pts)[keep]
+    if regions.depot_xy is not None:
+        return disc_tour.improve(seq, pts, discs, np.asarray(regions.depot_xy), seconds, seed)
+    for half in range(2):
+        if len(seq) < 3:
+            break
+        k = 0 if half == 0 else len(seq) // 2
+        seq, pts = np.roll(seq, -k), np.roll(pts, -k, axis=0)
+        anchor = pts[0].copy()
+        rest_seq, rest_pts = disc_tour.improve(seq[1:], pts[1:], discs, anchor, seconds / 2, seed)
+        seq = np.concatenate([seq[:1], rest_seq])
+        pts = np.vstack([anchor[None, :], rest_pts])
+    return seq, pts
 
 
 def _share(settings: SolveSettings, seconds: float, seed_offset: int = 0) -> SolveSettings:

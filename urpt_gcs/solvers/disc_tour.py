@@ -1,0 +1,856 @@
+"""Tours through discs on the plane (the close-enough TSP): exact stop positions and order search.
+
+A tour here is an order of *every* disc and one point in each: it starts at a fixed point
+(the depot), visits ``pts[0], ..., pts[n-1]`` in turn and returns. A disc whose point lies on
+the leg between its neighbours costs nothing: it is touched by that leg, so such "redundant
+stops" need no special case.
+
+- :func:`exact_positions`: with the order fixed the shortest such tour is a convex problem;
+  it is solved by Newton's method on a smoothed barrier (legs ``sqrt(|d|^2 + eps^2)``, discs
+  ``-mu log(r^2 - |p - c|^2)``), whose Hessian is block tridiagonal, so a step is linear in
+  ``n``. Per-stop moves alone stall where consecutive stops coincide (overlapping discs
+  entered at one point); a joint step does not.
+- :func:`improve`: iterated local search over the continuous tour: relocate a disc next to a
+  neighbour (its point re-optimised there) and 2-opt, each followed by re-settling the stops
+  around the change; random local double bridges between descents; the exact positions for
+  the best tour found.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numba as nb
+import numpy as np
+from scipy.spatial import cKDTree
+
+from urpt_gcs.gtsp import IntArray
+from urpt_gcs.solvers.refine import best_on_disc
+from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility import BoolArray
+
+# Nearest discs considered for a move.
+NEIGHBOURS = 10
+# Positions a random double bridge spans.
+WINDOW = 30
+# Share of the kicks that take a disc and its neighbours out and put them back greedily
+# (the others are double bridges).
+_RUIN_SHARE = 0.5
+# Share of the kicks after which the search also runs on the stops alone, the discs their
+# legs cross anyway taken out and put back after.
+_STRIP_SHARE = 0.3
+# Stops kept this far (relative to the radius) inside their disc.
+_INSIDE = 1e-9
+# Newton steps per barrier stage within the search (the exact positions of a whole tour
+# allow more: from a cold start the first stages need them).
+_SEARCH_STEPS = 100
+# Moves must gain at least this fraction of the tour.
+_MIN_GAIN = 1e-9
+
+
+@nb.njit(cache=True)
+def _pt(pts: FloatArray, ends: FloatArray, i: int) -> tuple[float, float]:
+    # ends[0] before the first stop, ends[1] after the last (both the depot for a tour).
+    n = pts.shape[0]
+    if i < 0:
+        return ends[0, 0], ends[0, 1]
+    if i >= n:
+        return ends[1, 0], ends[1, 1]
+    return pts[i, 0], pts[i, 1]
+
+
+@nb.njit(cache=True)
+def _dist(ax: float, ay: float, bx: float, by: float) -> float:
+    return math.hypot(ax - bx, ay - by)
+
+
+@nb.njit(cache=True)
+def path_length(pts: FloatArray, ends: FloatArray) -> float:
+    """Length of ends[0] -> pts[0] -> ... -> pts[n-1] -> ends[1]."""
+    n = pts.shape[0]
+    total = 0.0
+    for i in range(n + 1):
+        ax, ay = _pt(pts, ends, i - 1)
+        bx, by = _pt(pts, ends, i)
+        total += _dist(ax, ay, bx, by)
+    return total
+
+
+@nb.njit(cache=True)
+def _settle(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    lo: int,
+    hi: int,
+    sweeps: int = 50,
+) -> float:
+    """Per-stop best moves over positions ``lo..hi`` until they gain nothing (at most
+    ``sweeps`` sweeps); the gain."""
+    n = seq.size
+    lo = max(lo, 0)
+    hi = min(hi, n - 1)
+    total = 0.0
+    for _ in range(sweeps):
+        gain = 0.0
+        for k in range(lo, hi + 1):
+            ax, ay = _pt(pts, ends, k - 1)
+            bx, by = _pt(pts, ends, k + 1)
+            i = seq[k]
+            old = _dist(ax, ay, pts[k, 0], pts[k, 1]) + _dist(pts[k, 0], pts[k, 1], bx, by)
+            r = discs[i, 2] * (1.0 - _INSIDE)
+            px, py = best_on_disc(ax, ay, bx, by, discs[i, 0], discs[i, 1], r)
+            new = _dist(ax, ay, px, py) + _dist(px, py, bx, by)
+            if new < old:
+                gain += old - new
+                pts[k, 0] = px
+                pts[k, 1] = py
+        total += gain
+        if gain <= 1e-13 * (1.0 + total):
+            break
+    return total
+
+
+@nb.njit(cache=True)
+def _barrier_value(
+    seq: IntArray, x: FloatArray, discs: FloatArray, ends: FloatArray, mu: float, eps: float
+) -> float:
+    n = seq.size
+    f = 0.0
+    for leg in range(n + 1):
+        ax, ay = _pt(x, ends, leg - 1)
+        bx, by = _pt(x, ends, leg)
+        f += math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + eps * eps)
+    for k in range(n):
+        i = seq[k]
+        u = discs[i, 2] ** 2 - (x[k, 0] - discs[i, 0]) ** 2 - (x[k, 1] - discs[i, 1]) ** 2
+        if u <= 0.0:
+            return math.inf
+        f -= mu * math.log(u)
+    return f
+
+
+@nb.njit(cache=True)
+def _newton_stage(
+    seq: IntArray,
+    x: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    mu: float,
+    eps: float,
+    max_steps: int,
+    tol: float,
+) -> int:
+    n = seq.size
+    g = np.zeros((n, 2))
+    dg = np.zeros((n, 3))  # diagonal blocks: xx, xy, yy
+    off = np.zeros((n, 3))  # block between k and k + 1
+    cp = np.zeros((n, 4))  # eliminated off blocks (2 x 2, row-major)
+    rp = np.zeros((n, 2))
+    step = np.zeros((n, 2))
+    trial = np.zeros((n, 2))
+    f = _barrier_value(seq, x, discs, ends, mu, eps)
+    steps = 0
+    for _ in range(max_steps):
+        steps += 1
+        g[:] = 0.0
+        dg[:] = 0.0
+        off[:] = 0.0
+        for leg in range(n + 1):
+            ax, ay = _pt(x, ends, leg - 1)
+            bx, by = _pt(x, ends, leg)
+            dx, dy = bx - ax, by - ay
+            s = math.sqrt(dx * dx + dy * dy + eps * eps)
+            hxx = (1.0 - dx * dx / (s * s)) / s
+            hxy = -dx * dy / (s * s * s)
+            hyy = (1.0 - dy * dy / (s * s)) / s
+            a, b = leg - 1, leg
+            if a >= 0:
+                g[a, 0] -= dx / s
+                g[a, 1] -= dy / s
+                dg[a, 0] += hxx
+                dg[a, 1] += hxy
+                dg[a, 2] += hyy
+            if b < n:
+                g[b, 0] += dx / s
+                g[b, 1] += dy / s
+                dg[b, 0] += hxx
+                dg[b, 1] += hxy
+                dg[b, 2] += hyy
+            if a >= 0 and b < n:
+                off[a, 0] = -hxx
+                off[a, 1] = -hxy
+                off[a, 2] = -hyy
+        for k in range(n):
+            i = seq[k]
+            ex, ey = x[k, 0] - discs[i, 0], x[k, 1] - discs[i, 1]
+            u = discs[i, 2] ** 2 - ex * ex - ey * ey
+            g[k, 0] += mu * 2.0 * ex / u
+            g[k, 1] += mu * 2.0 * ey / u
+            dg[k, 0] += mu * (2.0 / u + 4.0 * ex * ex / (u * u))
+            dg[k, 1] += mu * (4.0 * ex * ey / (u * u))
+            dg[k, 2] += mu * (2.0 / u + 4.0 * ey * ey / (u * u))
+        # Block Thomas elimination of H step = -g.
+        for k in range(n):
+            m00, m01, m11 = dg[k, 0], dg[k, 1], dg[k, 2]
+            r0, r1 = -g[k, 0], -g[k, 1]
+            if k > 0:
+                b00, b01, b11 = off[k - 1, 0], off[k - 1, 1], off[k - 1, 2]
+                c00, c01, c10, c11 = cp[k - 1, 0], cp[k - 1, 1], cp[k - 1, 2], cp[k - 1, 3]
+                # M -= B^T C' (B symmetric)
+                m00 -= b00 * c00 + b01 * c10
+                m01 -= b00 * c01 + b01 * c11
+                m11 -= b01 * c01 + b11 * c11
+                r0 -= b00 * rp[k - 1, 0] + b01 * rp[k - 1, 1]
+                r1 -= b01 * rp[k - 1, 0] + b11 * rp[k - 1, 1]
+            # A stop on the straight line between its neighbours, deep inside its disc, has
+            # a nearly singular block; a tiny ridge keeps the step a descent direction.
+            ridge = 1e-10 * (m00 + m11)
+            m00 += ridge
+            m11 += ridge
+            det = m00 * m11 - m01 * m01
+            i00, i01, i11 = m11 / det, -m01 / det, m00 / det
+            rp[k, 0] = i00 * r0 + i01 * r1
+            rp[k, 1] = i01 * r0 + i11 * r1
+            if k < n - 1:
+                b00, b01, b11 = off[k, 0], off[k, 1], off[k, 2]
+                cp[k, 0] = i00 * b00 + i01 * b01
+                cp[k, 1] = i00 * b01 + i01 * b11
+                cp[k, 2] = i01 * b00 + i11 * b01
+                cp[k, 3] = i01 * b01 + i11 * b11
+        for k in range(n - 1, -1, -1):
+            sx, sy = rp[k, 0], rp[k, 1]
+            if k < n - 1:
+                sx -= cp[k, 0] * step[k + 1, 0] + cp[k, 1] * step[k + 1, 1]
+                sy -= cp[k, 2] * step[k + 1, 0] + cp[k, 3] * step[k + 1, 1]
+            step[k, 0] = sx
+            step[k, 1] = sy
+        dec = 0.0
+        for k in range(n):
+            dec -= g[k, 0] * step[k, 0] + g[k, 1] * step[k, 1]
+        if not dec > tol:
+            break
+        t = 1.0
+        moved = False
+        for _ls in range(60):
+            for k in range(n):
+                trial[k, 0] = x[k, 0] + t * step[k, 0]
+                trial[k, 1] = x[k, 1] + t * step[k, 1]
+            ft = _barrier_value(seq, trial, discs, ends, mu, eps)
+            if ft <= f - 0.25 * t * dec:
+                x[:] = trial
+                f = ft
+                moved = True
+                break
+            t *= 0.5
+        if not moved:
+            break
+    return steps
+
+
+@nb.njit(cache=True)
+def _exact_kernel(
+    seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, steps: int
+) -> FloatArray:
+    n = seq.size
+    length = path_length(pts, ends)
+    scale = max(length, 1e-9)
+    x: FloatArray = pts.copy()
+    # Well inside each disc: from next to the rim the barrier's first steps are tiny.
+    for k in range(n):
+        i = seq[k]
+        x[k, 0] = discs[i, 0] + (x[k, 0] - discs[i, 0]) * 0.9
+        x[k, 1] = discs[i, 1] + (x[k, 1] - discs[i, 1]) * 0.9
+    mu = 1e-3 * scale / (n + 1)
+    eps = 1e-3 * scale / (n + 1)
+    while mu > 1e-10 * scale / (n + 1):
+        _newton_stage(seq, x, discs, ends, mu, eps, steps, 1e-13 * scale)
+        mu *= 0.2
+        eps *= 0.2
+    # Pull every point a hair inside, as the sweeps keep them.
+    for k in range(n):
+        i = seq[k]
+        ex, ey = x[k, 0] - discs[i, 0], x[k, 1] - discs[i, 1]
+        d = math.hypot(ex, ey)
+        r = discs[i, 2] * (1.0 - _INSIDE)
+        if d > r:
+            x[k, 0] = discs[i, 0] + ex * r / d
+            x[k, 1] = discs[i, 1] + ey * r / d
+    _settle(seq, x, discs, ends, 0, n - 1, 2)
+    return x
+
+
+def exact_positions(
+    seq: IntArray, pts: FloatArray, discs: FloatArray, depot_xy: FloatArray
+) -> FloatArray:
+    """The shortest tour through the discs in the order ``seq`` (to about 1e-9 of its length).
+
+    Parameters
+    ----------
+    seq
+        The disc of each stop, in tour order.
+    pts
+        A point in each stop's disc (the start; returned when nothing shorter is found).
+    discs
+        ``(x, y, r)`` rows.
+    depot_xy
+        The fixed point the tour starts and ends at.
+
+    Returns
+    -------
+    numpy.ndarray
+        One point per stop, each inside its disc; the tour is never longer than ``pts``'.
+    """
+    seq = np.ascontiguousarray(seq, dtype=np.int64)
+    pts = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    discs = np.ascontiguousarray(discs, dtype=np.float64)
+    depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    _exact_window(seq, pts, discs, ends, 0, seq.size - 1, 400)
+    return pts
+
+
+@nb.njit(cache=True)
+def _exact_window(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    lo: int,
+    hi: int,
+    steps: int = _SEARCH_STEPS,
+) -> None:
+    """Exact positions for the stops ``lo..hi`` (the others fixed), in place, if shorter.
+
+    A disc of radius 0 pins its stop (the barrier needs an inside): the runs between pinned
+    stops are solved each on its own."""
+    n = seq.size
+    lo = max(lo, 0)
+    hi = min(hi, n - 1)
+    if hi < lo:
+        return
+    start = lo
+    for k in range(lo, hi + 2):
+        if k > hi or discs[seq[k], 2] <= 0.0:
+            if k > start:
+                _exact_run(seq, pts, discs, ends, start, k - 1, steps)
+            start = k + 1
+
+
+@nb.njit(cache=True)
+def _exact_run(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    lo: int,
+    hi: int,
+    steps: int,
+) -> None:
+    sub_ends = np.empty((2, 2))
+    sub_ends[0, 0], sub_ends[0, 1] = _pt(pts, ends, lo - 1)
+    sub_ends[1, 0], sub_ends[1, 1] = _pt(pts, ends, hi + 1)
+    sub_seq = seq[lo : hi + 1]
+    sub = pts[lo : hi + 1].copy()
+    x = _exact_kernel(sub_seq, sub, discs, sub_ends, steps)
+    if path_length(x, sub_ends) < path_length(sub, sub_ends):
+        pts[lo : hi + 1] = x
+
+
+@nb.njit(cache=True)
+def _insert_cost(
+    pts: FloatArray, ends: FloatArray, discs: FloatArray, d: int, j: int
+) -> tuple[float, float, float]:
+    """Cost of putting disc ``d`` between positions ``j`` and ``j + 1``, and its point."""
+    ax, ay = _pt(pts, ends, j)
+    bx, by = _pt(pts, ends, j + 1)
+    r = discs[d, 2] * (1.0 - _INSIDE)
+    px, py = best_on_disc(ax, ay, bx, by, discs[d, 0], discs[d, 1], r)
+    return _dist(ax, ay, px, py) + _dist(px, py, bx, by) - _dist(ax, ay, bx, by), px, py
+
+
+@nb.njit(cache=True)
+def _move_stop(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> int:
+    """Move the stop at ``i`` to just after position ``j`` (positions before the move); its
+    new position."""
+    d = seq[i]
+    px, py = pts[i, 0], pts[i, 1]
+    if j > i:
+        for k in range(i, j):
+            seq[k] = seq[k + 1]
+            pts[k, 0] = pts[k + 1, 0]
+            pts[k, 1] = pts[k + 1, 1]
+            pos[seq[k]] = k
+        new = j
+    else:
+        for k in range(i, j + 1, -1):
+            seq[k] = seq[k - 1]
+            pts[k, 0] = pts[k - 1, 0]
+            pts[k, 1] = pts[k - 1, 1]
+            pos[seq[k]] = k
+        new = j + 1
+    seq[new] = d
+    pts[new, 0] = px
+    pts[new, 1] = py
+    pos[d] = new
+    return new
+
+
+@nb.njit(cache=True)
+def _reverse(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> None:
+    while i < j:
+        seq[i], seq[j] = seq[j], seq[i]
+        t0, t1 = pts[i, 0], pts[i, 1]
+        pts[i, 0], pts[i, 1] = pts[j, 0], pts[j, 1]
+        pts[j, 0], pts[j, 1] = t0, t1
+        pos[seq[i]] = i
+        pos[seq[j]] = j
+        i += 1
+        j -= 1
+
+
+@nb.njit(cache=True)
+def _or_opt(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    d: int,
+    tol: float,
+) -> tuple[int, int]:
+    """Move the two or three stops from disc ``d``'s on, either way round, next to a
+    neighbour of ``d``, if that gains (points fixed); the positions changed (``n, -1`` when
+    it moved nothing)."""
+    n = seq.size
+    i = pos[d]
+    best, best_j, best_len, best_rev = -tol, -2, 0, False
+    for seg in range(2, 4):
+        e = i + seg - 1
+        if e >= n:
+            break
+        ax, ay = _pt(pts, ends, i - 1)
+        bx, by = _pt(pts, ends, e + 1)
+        gain = (
+            _dist(ax, ay, pts[i, 0], pts[i, 1])
+            + _dist(pts[e, 0], pts[e, 1], bx, by)
+            - _dist(ax, ay, bx, by)
+        )
+        if gain <= tol:
+            continue
+        for m in neigh[d]:
+            if pos[m] < 0:
+                continue
+            for j in (pos[m] - 1, pos[m]):
+                if i - 1 <= j <= e:
+                    continue
+                ux, uy = _pt(pts, ends, j)
+                vx, vy = _pt(pts, ends, j + 1)
+                base = _dist(ux, uy, vx, vy)
+                fwd = (
+                    _dist(ux, uy, pts[i, 0], pts[i, 1])
+                    + _dist(pts[e, 0], pts[e, 1], vx, vy)
+                    - base
+                    - gain
+                )
+                rev = (
+                    _dist(ux, uy, pts[e, 0], pts[e, 1])
+                    + _dist(pts[i, 0], pts[i, 1], vx, vy)
+                    - base
+                    - gain
+                )
+                if fwd < best:
+                    best, best_j, best_len, best_rev = fwd, j, seg, False
+                if rev < best:
+                    best, best_j, best_len, best_rev = rev, j, seg, True
+    if best_j == -2:
+        return n, -1
+    e = i + best_len - 1
+    j = best_j
+    # A rotation by three reversals puts the segment after j, in its own orientation.
+    if j > e:
+        _reverse(seq, pts, pos, i, e)
+        _reverse(seq, pts, pos, e + 1, j)
+        _reverse(seq, pts, pos, i, j)
+        lo, hi = j - best_len + 1, j
+        gap = i
+    else:
+        _reverse(seq, pts, pos, j + 1, i - 1)
+        _reverse(seq, pts, pos, i, e)
+        _reverse(seq, pts, pos, j + 1, e)
+        lo, hi = j + 1, j + best_len
+        gap = e + 1
+    if best_rev:
+        _reverse(seq, pts, pos, lo, hi)
+    _settle(seq, pts, discs, ends, lo - 2, hi + 2)
+    _settle(seq, pts, discs, ends, gap - 3, gap + 2)
+    return min(lo, gap) - 3, max(hi, gap) + 3
+
+
+@nb.njit(cache=True)
+def _wake(
+    seq: IntArray, active: BoolArray, queue: IntArray, head: int, size: int, lo: int, hi: int
+) -> int:
+    """Queue the discs at positions ``lo..hi`` not queued yet; the new queue size."""
+    n = seq.size
+    for k in range(max(lo, 0), min(hi, n - 1) + 1):
+        d = seq[k]
+        if not active[d]:
+            active[d] = True
+            queue[(head + size) % queue.size] = d
+            size += 1
+    return size
+
+
+@nb.njit(cache=True)
+def _descend(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    lo: int,
+    hi: int,
+) -> tuple[int, int]:
+    """Relocate, Or-opt and 2-opt moves until none gains, starting from the discs at
+    positions ``lo..hi`` and then those around each change; the first and last positions
+    changed (``n, -1`` when none)."""
+    n = seq.size
+    tol = _MIN_GAIN * path_length(pts, ends)
+    first, last = n, -1
+    # Indexed by disc: the tour may hold only some of them (the others stripped).
+    active = np.zeros(pos.size, dtype=np.bool_)
+    queue = np.empty(pos.size, dtype=np.int64)
+    head = 0
+    size = _wake(seq, active, queue, head, 0, lo, hi)
+    budget = 200 * n
+    while size > 0 and budget > 0:
+        budget -= 1
+        d = queue[head]
+        head = (head + 1) % queue.size
+        size -= 1
+        active[d] = False
+        # Relocate disc d next to one of its neighbours.
+        i = pos[d]
+        ax, ay = _pt(pts, ends, i - 1)
+        bx, by = _pt(pts, ends, i + 1)
+        gain = (
+            _dist(ax, ay, pts[i, 0], pts[i, 1])
+            + _dist(pts[i, 0], pts[i, 1], bx, by)
+            - _dist(ax, ay, bx, by)
+        )
+        best, best_j, best_x, best_y = -tol, -2, 0.0, 0.0
+        if gain > tol:
+            for m in neigh[d]:
+                if pos[m] < 0:
+                    continue
+                for j in (pos[m] - 1, pos[m]):
+                    # The slots either side of the stop itself are where it is now.
+                    if j == i or j == i - 1:
+                        continue
+                    cost, px, py = _insert_cost(pts, ends, discs, d, j)
+                    delta = cost - gain
+                    if delta < best:
+                        best, best_j, best_x, best_y = delta, j, px, py
+        if best_j > -2:
+            pts[i, 0] = best_x
+            pts[i, 1] = best_y
+            new = _move_stop(seq, pts, pos, i, best_j)
+            old_near = i if i < new else i + 1
+            _settle(seq, pts, discs, ends, old_near - 2, old_near + 1)
+            _settle(seq, pts, discs, ends, new - 2, new + 2)
+            first = min(first, i - 2, new - 2)
+            last = max(last, i + 2, new + 2)
+            size = _wake(seq, active, queue, head, size, old_near - 2, old_near + 1)
+            size = _wake(seq, active, queue, head, size, new - 2, new + 2)
+            continue
+        a, b = _or_opt(seq, pts, pos, discs, ends, neigh, d, tol)
+        if b >= a:
+            first = min(first, a)
+            last = max(last, b)
+            size = _wake(seq, active, queue, head, size, a, a + 6)
+            size = _wake(seq, active, queue, head, size, b - 6, b)
+            size = _wake(seq, active, queue, head, size, pos[d] - 2, pos[d] + 4)
+            continue
+        # 2-opt: the leg out of d's stop against the legs near its neighbours.
+        done = False
+        for m in neigh[d]:
+            if done:
+                break
+            if pos[m] < 0:
+                continue
+            i = pos[d]
+            j = pos[m]
+            for side in range(2):
+                if side == 0:
+                    a, b = i, j  # legs (a, a+1) and (b, b+1) become (a, b), (a+1, b+1)
+                else:
+                    a, b = i - 1, j - 1  # legs into d and into m
+                lo2, hi2 = min(a, b), max(a, b)
+                if hi2 - lo2 < 2 or lo2 < -1 or hi2 > n - 1:
+                    continue
+                p0x, p0y = _pt(pts, ends, lo2)
+                p1x, p1y = _pt(pts, ends, lo2 + 1)
+                q0x, q0y = _pt(pts, ends, hi2)
+                q1x, q1y = _pt(pts, ends, hi2 + 1)
+                delta = (
+                    _dist(p0x, p0y, q0x, q0y)
+                    + _dist(p1x, p1y, q1x, q1y)
+                    - _dist(p0x, p0y, p1x, p1y)
+                    - _dist(q0x, q0y, q1x, q1y)
+                )
+                if delta < -tol:
+                    _reverse(seq, pts, pos, lo2 + 1, hi2)
+                    _settle(seq, pts, discs, ends, lo2 - 1, lo2 + 2)
+                    _settle(seq, pts, discs, ends, hi2 - 1, hi2 + 2)
+                    first = min(first, lo2 - 1)
+                    last = max(last, hi2 + 2)
+                    size = _wake(seq, active, queue, head, size, lo2 - 1, lo2 + 2)
+                    size = _wake(seq, active, queue, head, size, hi2 - 1, hi2 + 2)
+                    done = True
+                    break
+    return first, last
+
+
+@nb.njit(cache=True)
+def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int) -> None:
+    """A double bridge: the stops ``a..b-1`` and ``b..c-1`` swap places."""
+    old_seq = seq[a:c].copy()
+    old_pts = pts[a:c].copy()
+    k = a
+    for src in range(b, c):
+        seq[k] = old_seq[src - a]
+        pts[k, 0] = old_pts[src - a, 0]
+        pts[k, 1] = old_pts[src - a, 1]
+        k += 1
+    for src in range(a, b):
+        seq[k] = old_seq[src - a]
+        pts[k, 0] = old_pts[src - a, 0]
+        pts[k, 1] = old_pts[src - a, 1]
+        k += 1
+    for k in range(a, c):
+        pos[seq[k]] = k
+
+
+@nb.njit(cache=True)
+def _ruin(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    removed: IntArray,
+) -> tuple[int, int]:
+    """Take the discs ``removed`` out of the tour and put each back (in the order given) at
+    its cheapest place, its point the best there; the first and last positions changed."""
+    n = seq.size
+    out = np.zeros(n, dtype=np.bool_)
+    for d in removed:
+        out[d] = True
+    m = 0
+    for k in range(n):
+        if not out[seq[k]]:
+            seq[m] = seq[k]
+            pts[m, 0] = pts[k, 0]
+            pts[m, 1] = pts[k, 1]
+            m += 1
+    first, last = n, -1
+    for d in removed:
+        cur = pts[:m]
+        best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
+        for j in range(-1, m):
+            cost, px, py = _insert_cost(cur, ends, discs, d, j)
+            if cost < best:
+                best, best_j, best_x, best_y = cost, j, px, py
+        for k in range(m, best_j + 1, -1):
+            seq[k] = seq[k - 1]
+            pts[k, 0] = pts[k - 1, 0]
+            pts[k, 1] = pts[k - 1, 1]
+        seq[best_j + 1] = d
+        pts[best_j + 1, 0] = best_x
+        pts[best_j + 1, 1] = best_y
+        m += 1
+        first = min(first, best_j + 1)
+        last = max(last, best_j + 1)
+    for k in range(n):
+        pos[seq[k]] = k
+    return first, last
+
+
+@nb.njit(cache=True)
+def _strip(
+    seq: IntArray, pts: FloatArray, pos: IntArray, ends: FloatArray, tol: float
+) -> tuple[int, IntArray]:
+    """Take out every stop that lies on the leg between its neighbours (its disc is touched
+    by that leg anyway); the stops left come first. The count left, and the discs taken."""
+    n = seq.size
+    taken = np.empty(n, dtype=np.int64)
+    t = 0
+    m = 0
+    for k in range(n):
+        ax, ay = _pt(pts[:m], ends, m - 1)
+        bx, by = _pt(pts, ends, k + 1)
+        gain = (
+            _dist(ax, ay, pts[k, 0], pts[k, 1])
+            + _dist(pts[k, 0], pts[k, 1], bx, by)
+            - _dist(ax, ay, bx, by)
+        )
+        if gain <= tol:
+            taken[t] = seq[k]
+            pos[seq[k]] = -1
+            t += 1
+        else:
+            seq[m] = seq[k]
+            pts[m, 0] = pts[k, 0]
+            pts[m, 1] = pts[k, 1]
+            pos[seq[m]] = m
+            m += 1
+    return m, taken[:t].copy()
+
+
+@nb.njit(cache=True)
+def _put_back(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    m: int,
+    taken: IntArray,
+) -> None:
+    """Put the discs ``taken`` back into the tour of the first ``m`` stops, each at its
+    cheapest place (free where a leg already crosses it)."""
+    for d in taken:
+        cur = pts[:m]
+        best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
+        for j in range(-1, m):
+            cost, px, py = _insert_cost(cur, ends, discs, d, j)
+            if cost < best:
+                best, best_j, best_x, best_y = cost, j, px, py
+        for k in range(m, best_j + 1, -1):
+            seq[k] = seq[k - 1]
+            pts[k, 0] = pts[k - 1, 0]
+            pts[k, 1] = pts[k - 1, 1]
+        seq[best_j + 1] = d
+        pts[best_j + 1, 0] = best_x
+        pts[best_j + 1, 1] = best_y
+        m += 1
+    for k in range(m):
+        pos[seq[k]] = k
+
+
+def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
+    """Each disc's ``k`` nearest discs by the gap between them (rims, not centres)."""
+    n = len(discs)
+    k = min(k, n - 1)
+    if k <= 0:
+        return np.zeros((n, 0), dtype=np.int64)
+    tree = cKDTree(discs[:, :2])
+    q = min(n, 3 * k + 1)
+    dist, idx = tree.query(discs[:, :2], k=q)
+    gap = dist - discs[idx, 2] - discs[:, 2:3]
+    gap[idx == np.arange(n)[:, None]] = np.inf
+    order = np.argsort(gap, axis=1)[:, :k]
+    out: IntArray = np.take_along_axis(idx, order, axis=1).astype(np.int64)
+    return np.ascontiguousarray(out)
+
+
+def improve(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    depot_xy: FloatArray,
+    time_limit_s: float,
+    seed: int = 0,
+) -> tuple[IntArray, FloatArray]:
+    """A shorter tour through the discs of ``seq`` from a given one, by iterated local search.
+
+    ``seq`` holds discs (rows of ``discs``, each once); ``pts`` a point in each. Runs for
+    about ``time_limit_s`` and returns the best order and points found (never longer than
+    the start).
+    """
+    started = time.perf_counter()
+    # The search numbers the discs of the tour 0..n-1 in their starting order: ``seq`` may
+    # hold only some of ``discs``.
+    ids = np.array(seq, dtype=np.int64)
+    discs = np.ascontiguousarray(np.asarray(discs, dtype=np.float64)[ids])
+    depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    seq = np.arange(ids.size, dtype=np.int64)
+    pts = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    n = seq.size
+    start_len = path_length(pts, ends)
+    start_seq, start_pts = seq.copy(), pts.copy()
+    if n < 2:
+        return ids, exact_positions(seq, pts, discs, depot)
+    pos = np.empty(n, dtype=np.int64)
+    pos[seq] = np.arange(n)
+    neigh = neighbours(discs)
+    _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
+    best_seq, best_pts = seq.copy(), pts.copy()
+    best_len = path_length(pts, ends)
+    rng = np.random.default_rng(seed)
+    window = min(n, WINDOW)
+    while n >= 4 and time.perf_counter() - started < time_limit_s:
+        if rng.random() < _RUIN_SHARE:
+            centre = int(rng.integers(n))
+            k = int(rng.integers(2, neigh.shape[1] + 1))
+            removed = rng.permutation(np.append(neigh[centre, :k], centre))
+            lo, hi = _ruin(seq, pts, pos, discs, ends, removed)
+            _descent(seq, pts, pos, discs, ends, neigh, lo - 10, hi + 10)
+        else:
+            start = int(rng.integers(0, n - window + 1))
+            a, b, c = np.sort(rng.choice(window, 3, replace=False)) + start + 1
+            _kick(seq, pts, pos, int(a), int(b), int(c))
+            _descent(seq, pts, pos, discs, ends, neigh, a - 10, c + 10)
+        if rng.random() < _STRIP_SHARE:
+            # Search over the stops that matter, then put the others back.
+            tol = _MIN_GAIN * path_length(pts, ends)
+            m, taken = _strip(seq, pts, pos, ends, tol)
+            if m >= 4:
+                _descend(seq[:m], pts[:m], pos, discs, ends, neigh, 0, m - 1)
+            _put_back(seq, pts, pos, discs, ends, m, taken)
+            _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
+        length = path_length(pts, ends)
+        # Ties are taken too: they let the search drift across plateaus.
+        if length <= best_len * (1.0 + 1e-12):
+            best_len = min(length, best_len)
+            best_seq[:] = seq
+            best_pts[:] = pts
+        else:
+            seq[:] = best_seq
+            pts[:] = best_pts
+            pos[seq] = np.arange(n)
+    if best_len >= start_len:
+        return ids[start_seq], start_pts
+    return ids[best_seq], best_pts
+
+
+@nb.njit(cache=True)
+def _descent(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    lo: int,
+    hi: int,
+) -> None:
+    """Local search to a local optimum from the stops ``lo..hi`` on, the positions exact
+    around them and around every change."""
+    a, b = lo - 5, hi + 5
+    _exact_window(seq, pts, discs, ends, a, b)
+    for _ in range(20):
+        before = path_length(pts, ends)
+        first, last = _descend(seq, pts, pos, discs, ends, neigh, a, b)
+        if last < first:
+            break
+        a, b = first - 5, last + 5
+        _exact_window(seq, pts, discs, ends, a, b)
+        if path_length(pts, ends) >= before * (1.0 - 1e-12):
+            break
