@@ -343,9 +343,10 @@ def test_paper_bench_on_the_cluster_equals_the_serial_run(client: Client) -> Non
 
 def test_the_readme_jobs_file_reads_as_it_says(tmp_path: Path) -> None:
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    block = re.search(r"^```toml\n(.*?)^```", readme, re.DOTALL | re.MULTILINE)
-    assert block is not None
-    jobs = read_jobs(_write(tmp_path / "jobs.toml", block.group(1)), tmp_path / "DIR")
+    blocks = re.findall(r"^```toml\n(.*?)^```", readme, re.DOTALL | re.MULTILINE)
+    block = [b for b in blocks if "[[site]]" in b]
+    assert len(block) == 1
+    jobs = read_jobs(_write(tmp_path / "jobs.toml", block[0]), tmp_path / "DIR")
     assert [j.name for j in jobs] == ["quarry-alt80", "quarry-alt100", "quarry-alt120"]
     assert {j.settings.fov_deg for j in jobs} == {35.0}
     assert jobs[0].dem == str(tmp_path / "quarry" / "dsm.tif")
