@@ -71,6 +71,13 @@ SeparationMode = Literal["altitude", "time"]
 SEPARATION_MODES = ("altitude", "time")
 # Start delays are searched in whole steps of this, up to the undelayed makespan.
 DELAY_STEP_S = 5.0
+# A vehicle keeps its planned timing only so well (a real copter flew the demo 3 % faster
+# than the flight-time model): separation must hold with either vehicle of a pair up to
+# this much early or late against the other -- the larger of a fixed time and a share of
+# the longer flight -- tried in steps of TIMING_STEP_S.
+TIMING_SLACK_S = 10.0
+TIMING_SLACK_SHARE = 0.05
+TIMING_STEP_S = 1.0
 # The longest start delay, as a share of the longest flight; beyond it the plan is refused.
 MAX_DELAY_SHARE = 0.5
 # Each vehicle's written altitude is rounded to whole centimetres (home down, height up): the
@@ -234,6 +241,7 @@ class Separation:
     closest: Closest | None
     closest_latlon: tuple[float, float] | None
     closest_horizontal_m: float | None
+    timing_slack_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -687,15 +695,44 @@ def closest(a: Track, b: Track, horizontal: bool) -> tuple[float, float, FloatAr
     return float(gap[i]), when, where
 
 
+def timing_slack_s(a: Track, b: Track) -> float:
+    """How far early or late one vehicle of a pair may run against the other."""
+    longest = max(a.t_s[-1] - a.t_s[0], b.t_s[-1] - b.t_s[0])
+    return max(TIMING_SLACK_S, TIMING_SLACK_SHARE * float(longest))
+
+
 def _pair_closest(tracks: Sequence[Track], i: int, j: int) -> Closest | None:
-    full = closest(tracks[i], tracks[j], horizontal=False)
-    if full is None:
-        return None
-    flat = closest(tracks[i], tracks[j], horizontal=True)
-    assert flat is not None
-    return Closest(
-        full[0], flat[0], (i + 1, j + 1), full[1], (float(full[2][0]), float(full[2][1]))
-    )
+    """The pair's closest approach, the least over ``j`` running early or late against ``i``
+    by up to :func:`timing_slack_s` (each shift's approach exact, the shifts in steps of
+    :data:`TIMING_STEP_S`); its time is on ``i``'s clock."""
+    a, b = tracks[i], tracks[j]
+    slack = timing_slack_s(a, b)
+    steps = math.ceil(slack / TIMING_STEP_S)
+    best: Closest | None = None
+    for shift in np.linspace(-slack, slack, 2 * steps + 1):
+        moved = b.shifted(float(shift))
+        full = closest(a, moved, horizontal=False)
+        if full is None:
+            continue
+        flat = closest(a, moved, horizontal=True)
+        assert flat is not None
+        if best is not None and full[0] >= best.distance_m and flat[0] >= best.horizontal_m:
+            continue
+        found = Closest(
+            full[0], flat[0], (i + 1, j + 1), full[1], (float(full[2][0]), float(full[2][1]))
+        )
+        if best is None:
+            best = found
+        else:
+            # The least of each measure over the shifts (3-D and horizontal apart).
+            best = Closest(
+                min(best.distance_m, found.distance_m),
+                min(best.horizontal_m, found.horizontal_m),
+                best.vehicles,
+                found.at_s if found.distance_m < best.distance_m else best.at_s,
+                found.where_xy if found.distance_m < best.distance_m else best.where_xy,
+            )
+    return best
 
 
 def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separation:
@@ -704,7 +741,8 @@ def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separ
     Vehicles are taken in turn (:func:`_delays`, for a few orders of take-off); each starts
     at the first step of :data:`DELAY_STEP_S` at which its track stays ``min_m`` from every
     earlier one's while both fly (3-D in altitude mode, less the written altitudes'
-    rounding; horizontal in time mode). None up to :data:`MAX_DELAY_SHARE` of the longest
+    rounding; horizontal in time mode), with either running early or late by up to
+    :func:`timing_slack_s`. None up to :data:`MAX_DELAY_SHARE` of the longest
     flight in any order: refused, naming the pair, where and when.
     """
     base = [track(p) for p in plans]
@@ -756,6 +794,14 @@ def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separ
         closest=least,
         closest_latlon=where,
         closest_horizontal_m=flat,
+        timing_slack_s=max(
+            (
+                timing_slack_s(tracks[i], tracks[j])
+                for i in range(len(tracks))
+                for j in range(i + 1, len(tracks))
+            ),
+            default=0.0,
+        ),
     )
 
 

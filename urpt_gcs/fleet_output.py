@@ -100,6 +100,7 @@ def fleet_summary(fleet: FleetPlan, files: list[str]) -> dict[str, Any]:
                 "closest_lat": None if sep.closest_latlon is None else sep.closest_latlon[0],
                 "closest_lon": None if sep.closest_latlon is None else sep.closest_latlon[1],
                 "start_delays_s": list(sep.start_delays_s),
+                "timing_slack_s": round(sep.timing_slack_s, 1),
             },
         },
         "targets": sum(len(p.targets.targets) for p in fleet.plans),
@@ -149,7 +150,8 @@ def fleet_summary_text(data: dict[str, Any]) -> str:
         if sep["closest_approach_m"] is None
         else f"closest approach {sep['closest_approach_m']:.1f} m (horizontally "
         f"{sep['closest_horizontal_m']:.1f} m) between vehicles {sep['closest_vehicles'][0]} "
-        f"and {sep['closest_vehicles'][1]} at {sep['closest_at_s']:.0f} s"
+        f"and {sep['closest_vehicles'][1]} at {sep['closest_at_s']:.0f} s, with either "
+        f"up to {sep['timing_slack_s']:g} s early or late"
     )
     lines.append(f"separation     {how}; {closest}")
     delayed = [(k, d) for k, d in enumerate(sep["start_delays_s"], start=1) if d > 0]

@@ -53,6 +53,8 @@ Progress = Callable[[str], None]
 # at its photos); this much below the spacing is still separation.
 ALTITUDE_TOLERANCE_M = 2.0
 # Both vehicles this close to their homes' altitude are parked, not flying.
+# Homes closer than this are one launch pad, used in turn.
+SAME_PAD_M = 1.0
 ON_GROUND_M = 1.0
 # Positions whose delivery delay is estimated together (about half a second at 20x).
 DELAY_WINDOW = 101
@@ -295,12 +297,17 @@ def _takeoff(track: _Track | None) -> int | None:
     return int(np.argmax(track.rel_m > ON_GROUND_M))
 
 
+def _same_pad(a: _Track, b: _Track) -> bool:
+    """Whether two tracks start from one home (within :data:`SAME_PAD_M`)."""
+    return bool(np.linalg.norm(a.ecef[0] - b.ecef[0]) <= SAME_PAD_M)
+
+
 def closest_approach(
     flights: Sequence[Flight], homes_amsl_m: Sequence[float]
 ) -> tuple[Approach | None, tuple[float, ...]]:
     """The closest 3-D approach of any two vehicles at equal times, while at least one of
-    them flies; and each vehicle's take-off, in wall seconds after the first (NaN for one
-    that never took off).
+    them flies (both, for two from one home: they use its pad in turn); and each vehicle's
+    take-off, in wall seconds after the first (NaN for one that never took off).
 
     Positions are compared on one clock (see the module docstring), each track linearly
     interpolated at the other's sample times.
@@ -325,7 +332,10 @@ def closest_approach(
             lo, hi = max(a.time_s[0], b.time_s[0]), min(a.time_s[-1], b.time_s[-1])
             times = np.union1d(a.time_s, b.time_s)
             times = times[(times >= lo) & (times <= hi)]
-            flying = (a.at(a.rel_m, times) > ON_GROUND_M) | (b.at(b.rel_m, times) > ON_GROUND_M)
+            up_a, up_b = a.at(a.rel_m, times) > ON_GROUND_M, b.at(b.rel_m, times) > ON_GROUND_M
+            # Vehicles sharing a home share its pad and take off and land there in turn (as
+            # planned, by their start delays): the one waiting is not on the pad.
+            flying = (up_a & up_b) if _same_pad(a, b) else (up_a | up_b)
             if not flying.any():
                 continue
             gap = np.linalg.norm(a.position(times) - b.position(times), axis=1)
