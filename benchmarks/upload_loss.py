@@ -5,7 +5,7 @@
 
 Each run starts the in-process simulator (``urpt_gcs.sitl``) on a free loopback UDP port with
 ``--loss P`` each way and seed = run number, uploads the demo mission (28 items) through
-:func:`urpt_gcs.link.upload` with the default settings, and checks what the simulator then
+:func:`urpt_gcs.drone.link.upload` with the default settings, and checks what the simulator then
 holds. Prints, per loss rate, the share of runs verified, the attempts used, the median and
 maximum wall time of the upload call (connecting included) and of the upload and read-back
 alone (verified runs, from the report), and any run that reported success
@@ -24,12 +24,12 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from urpt_gcs import mavsdk_link
+from urpt_gcs.drone import mavsdk_link
+from urpt_gcs.drone.link import UploadSettings, upload
+from urpt_gcs.drone.readback import WireItem, compare, wire_items
 from urpt_gcs.errors import LinkError
-from urpt_gcs.formats import read_plan
-from urpt_gcs.link import UploadSettings, upload
 from urpt_gcs.mission import Mission
-from urpt_gcs.readback import WireItem, compare, wire_items
+from urpt_gcs.outputs.formats import read_plan
 from urpt_gcs.sitl import SitlServer, VehicleSettings
 from urpt_gcs.sitl.replay import free_udp_port
 

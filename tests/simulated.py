@@ -10,8 +10,8 @@ from typing import Any
 
 from conftest import DEMO
 
-from urpt_gcs.formats import read_plan
 from urpt_gcs.mission import Mission
+from urpt_gcs.outputs.formats import read_plan
 from urpt_gcs.sitl import SitlServer, VehicleSettings
 from urpt_gcs.sitl.replay import free_udp_port
 

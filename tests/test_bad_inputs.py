@@ -544,7 +544,7 @@ NOBODY = "udpin://127.0.0.1:14999"  # nothing listens: a connection attempt woul
 
 def run_upload(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, float]:
     """`urpt-gcs upload PATH` with a connection that must not be tried."""
-    from urpt_gcs import mavsdk_link
+    from urpt_gcs.drone import mavsdk_link
 
     def no_connection(*_args: object, **_kwargs: object) -> None:
         raise AssertionError("a connection was attempted")

@@ -19,6 +19,7 @@ from test_plan import _kml_targets, _valid_targets
 
 from urpt_gcs.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.cli import main
+from urpt_gcs.drone.readback import WireItem, compare, wire_items
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.mission import (
     GeoPoint,
@@ -27,9 +28,8 @@ from urpt_gcs.mission import (
     photo_headings,
     upload_problem,
 )
+from urpt_gcs.outputs.products import write_products
 from urpt_gcs.planner import PlanSettings, plan
-from urpt_gcs.products import write_products
-from urpt_gcs.readback import WireItem, compare, wire_items
 from urpt_gcs.sitl.store import Item, ardupilot_stored
 from urpt_gcs.solvers import SolveSettings
 from urpt_gcs.visibility import Camera

@@ -23,9 +23,9 @@ from independent import check_mission
 from scipy.ndimage import map_coordinates
 
 from urpt_gcs.certificate import outer_regions
+from urpt_gcs.outputs.products import write_products
+from urpt_gcs.outputs.report import flight_quality, summary_text
 from urpt_gcs.planner import PlanSettings, plan
-from urpt_gcs.products import write_products
-from urpt_gcs.report import flight_quality, summary_text
 from urpt_gcs.solvers import SolveSettings
 from urpt_gcs.solvers.bound import lower_bound
 

@@ -25,9 +25,9 @@ from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
-from urpt_gcs.fleet_folder import read_fleet
-from urpt_gcs.fleet_upload import upload_fleet
-from urpt_gcs.link import UploadSettings
+from urpt_gcs.drone.fleet_upload import upload_fleet
+from urpt_gcs.drone.link import UploadSettings
+from urpt_gcs.outputs.fleet_folder import read_fleet
 from urpt_gcs.sitl import SitlServer, VehicleSettings
 from urpt_gcs.sitl.fleet import FleetReport, replay_fleet
 from urpt_gcs.sitl.replay import Flight, ReplaySettings, free_udp_port, read_mission
@@ -402,7 +402,7 @@ def _synthetic_flight(
     """A vehicle crossing the origin's meridian at 100 m, 5 m/s east or west, its clock
     ``boot_s`` ahead, running ``rate`` simulated seconds per wall second; each position
     arrives 0-20 ms late."""
-    from urpt_gcs.link import UploadReport
+    from urpt_gcs.drone.link import UploadReport
     from urpt_gcs.sitl.replay import TrackPoint, VehicleIdentity
 
     rng = np.random.default_rng(seed)

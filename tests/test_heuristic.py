@@ -197,7 +197,7 @@ def test_search_settings_are_validated(field: str, value: object) -> None:
 )
 @needs_shared(GTSPLIB)
 def test_reaches_best_known_on_gtsplib(name: str, best_known: int) -> None:
-    gtsplib = pytest.importorskip("urpt_gcs.formats.gtsplib")
+    gtsplib = pytest.importorskip("urpt_gcs.outputs.formats.gtsplib")
     instance = gtsplib.read_gtsplib(GTSPLIB / f"{name}.gtsp")
     tour = HeuristicSolver().solve(instance, SETTINGS)
     assert tour.length == best_known

@@ -19,8 +19,8 @@ from independent import (
 )
 from pymavlink import mavutil
 
+from urpt_gcs.outputs.products import write_products
 from urpt_gcs.planner import PlanSettings, plan
-from urpt_gcs.products import write_products
 from urpt_gcs.solvers import SolveSettings
 from urpt_gcs.targets import read_targets
 

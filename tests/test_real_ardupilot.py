@@ -27,11 +27,11 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
+from urpt_gcs.drone.link import upload
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.formats import read_plan
 from urpt_gcs.geofence import read_plan_geofence
-from urpt_gcs.link import upload
 from urpt_gcs.mission import Mission, photo_headings
+from urpt_gcs.outputs.formats import read_plan
 from urpt_gcs.sitl.ardupilot_sitl import RunningSitl, launch, resolve_binary
 from urpt_gcs.sitl.replay import Flight, ReplaySettings, replay
 from urpt_gcs.targets import read_targets

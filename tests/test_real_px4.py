@@ -27,10 +27,10 @@ from mavsdk.plugins.mission_raw import MissionItem as MavsdkItem
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
-from urpt_gcs.link import upload, upload_verified
-from urpt_gcs.mavsdk_link import connect
+from urpt_gcs.drone.link import upload, upload_verified
+from urpt_gcs.drone.mavsdk_link import connect
+from urpt_gcs.drone.readback import compare, wire_items
 from urpt_gcs.mission import Mission, waypoint_positions
-from urpt_gcs.readback import compare, wire_items
 from urpt_gcs.sitl import px4_sitl
 from urpt_gcs.sitl.judge import Expected, ReplayReport, TargetSeen, judge
 from urpt_gcs.sitl.replay import (

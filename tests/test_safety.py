@@ -19,8 +19,8 @@ from shapely.geometry import Point, shape
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError
+from urpt_gcs.outputs.products import write_products
 from urpt_gcs.planner import Plan, PlanSettings, plan
-from urpt_gcs.products import write_products
 from urpt_gcs.safety import FlightModel, split_sorties
 from urpt_gcs.solvers import SolveSettings, Tour
 from urpt_gcs.sorties import order_sorties
@@ -323,7 +323,7 @@ def test_geojson_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, 
 
 
 def test_map_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
-    from urpt_gcs.mapview import map_figure
+    from urpt_gcs.outputs.mapview import map_figure
 
     result, out, data = sortie_plan
     assert (out / "map.png").read_bytes().startswith(b"\x89PNG")

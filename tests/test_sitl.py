@@ -19,10 +19,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
-from urpt_gcs.formats import waypoints_text
-from urpt_gcs.link import upload
+from urpt_gcs.drone.link import upload
+from urpt_gcs.drone.readback import WireItem, compare, wire_items
 from urpt_gcs.mission import Mission
-from urpt_gcs.readback import WireItem, compare, wire_items
+from urpt_gcs.outputs.formats import waypoints_text
 from urpt_gcs.sitl import VehicleSettings
 from urpt_gcs.sitl.events import Reached, Text
 from urpt_gcs.sitl.model import Vehicle

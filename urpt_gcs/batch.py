@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 from urpt_gcs.camera import frame_from_flags
 from urpt_gcs.cluster import Done, probe_workers, run_jobs
 from urpt_gcs.errors import ClusterError, JobsFileError, SettingsError, UrptError
-from urpt_gcs.output import check_folder, commit
+from urpt_gcs.outputs.output import check_folder, commit
 from urpt_gcs.visibility import DEFAULT_HEADINGS
 
 if sys.version_info >= (3, 11):
@@ -469,8 +469,8 @@ def run_job(job: Job) -> JobOutput:
     UrptError
         The job's plan failed; the message is its one line.
     """
+    from urpt_gcs.outputs.products import render_products
     from urpt_gcs.planner import plan
-    from urpt_gcs.products import render_products
 
     result = plan(Path(job.dem), Path(job.targets), job.settings)
     data, files = render_products(result, Path(job.out), with_map=job.with_map)
@@ -517,7 +517,7 @@ def output_folders(jobs: Sequence[Job], out_dir: Path) -> None:
     OutputError
         Naming the folder and the fix.
     """
-    from urpt_gcs.products import check_out
+    from urpt_gcs.outputs.products import check_out
 
     check_folder(out_dir, "--out", names=[RESULTS_FILE])
     for job in jobs:
@@ -561,7 +561,7 @@ def run_batch(
     ClusterError, OutputError
         Before any job runs: an input a worker cannot read, an output that cannot be written.
     """
-    from urpt_gcs.products import check_out
+    from urpt_gcs.outputs.products import check_out
 
     output_folders(jobs, out_dir)
     check_inputs(jobs, client, remote)

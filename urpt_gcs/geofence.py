@@ -8,7 +8,7 @@ NAV_FENCE_CIRCLE_* item per circle with its radius in param1, frame GLOBAL, no a
 
 Nothing here is firmware-specific except :func:`compare_fence`'s allowance for what a
 firmware changes on read-back (ArduPilot was seen to return ``autocontinue`` 0); the upload
-itself is :func:`urpt_gcs.link.upload_fence_verified`.
+itself is :func:`urpt_gcs.drone.link.upload_fence_verified`.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from urpt_gcs.drone.readback import Comparison, WireItem
 from urpt_gcs.errors import MissionFileError, SettingsError
 from urpt_gcs.mission import Firmware, GeoPoint, command_name
-from urpt_gcs.readback import Comparison, WireItem
 
 FENCE_TYPE = mavlink.MAV_MISSION_TYPE_FENCE
 POLYGON_COMMANDS = {

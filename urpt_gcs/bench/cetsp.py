@@ -25,7 +25,7 @@ import numpy as np
 
 from urpt_gcs.cluster import map_jobs
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.output import write_all
+from urpt_gcs.outputs.output import write_all
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import solve_regions
 from urpt_gcs.solvers.regions import RegionSet

@@ -22,10 +22,10 @@ import numpy as np
 
 from urpt_gcs.bench import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.formats.gtsplib import BENCH_FLAG, read_gtsplib
 from urpt_gcs.gtsp import Instance
 from urpt_gcs.inputs import GTSPLIB_MAX_BYTES, read_capped
-from urpt_gcs.output import write_all
+from urpt_gcs.outputs.formats.gtsplib import BENCH_FLAG, read_gtsplib
+from urpt_gcs.outputs.output import write_all
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 
 __all__ = ["Row", "bench_solvers", "format_table", "results_csv", "run_gtsplib", "tour_cost"]

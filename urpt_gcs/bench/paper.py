@@ -35,7 +35,7 @@ from urpt_gcs.bench import rows_csv
 from urpt_gcs.certificate import certify, outer_regions
 from urpt_gcs.cluster import map_jobs
 from urpt_gcs.gtsp import Covers, Instance, build_instance
-from urpt_gcs.output import write_all
+from urpt_gcs.outputs.output import write_all
 from urpt_gcs.refinement import Site, refine_tour
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.approx import paper_path

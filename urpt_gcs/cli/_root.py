@@ -105,7 +105,7 @@ def upload_and_report(
 ) -> None:
     """Upload with a verified read-back (the mission, then its geofence if it has one); one
     line each on success, exit 1 on failure."""
-    from urpt_gcs.link import upload
+    from urpt_gcs.drone.link import upload
 
     progress = terminal_progress()
     try:

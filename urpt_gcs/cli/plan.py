@@ -11,8 +11,8 @@ import click
 
 from urpt_gcs.camera import CAMERAS, frame_from_flags
 from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
+from urpt_gcs.drone.link import DEFAULT_URL
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.link import DEFAULT_URL
 from urpt_gcs.mission import FIRMWARES, MissionSettings
 from urpt_gcs.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
@@ -275,9 +275,9 @@ def plan_command(
     retries: int,
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
+    from urpt_gcs.outputs.products import check_extra, check_out, write_products
+    from urpt_gcs.outputs.report import summary_text
     from urpt_gcs.planner import plan
-    from urpt_gcs.products import check_extra, check_out, write_products
-    from urpt_gcs.report import summary_text
 
     try:
         fleet = _fleet(vehicles, fleet_file, separation, layer_spacing, min_separation)
@@ -364,7 +364,7 @@ def plan_command(
                 say("writing outputs")
             also = []
             if export_gtsp is not None and export is not None:
-                from urpt_gcs.formats.gtsplib import write_gtsplib
+                from urpt_gcs.outputs.formats.gtsplib import write_gtsplib
 
                 comment = f"urpt-gcs plan of {Path(targets).name}"
                 text = write_gtsplib(result.instance, export_gtsp.stem, comment)
@@ -436,7 +436,11 @@ def _plan_fleet(
     stream: TextIO,
 ) -> None:
     from urpt_gcs.fleet import plan_fleet_mission
-    from urpt_gcs.fleet_output import check_fleet_out, fleet_summary_text, write_fleet_products
+    from urpt_gcs.outputs.fleet_output import (
+        check_fleet_out,
+        fleet_summary_text,
+        write_fleet_products,
+    )
 
     destinations = check_fleet_out(out, len(fleet.vehicles))
     live = sys.stderr.isatty()

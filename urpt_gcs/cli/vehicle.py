@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 import click
 
 from urpt_gcs.cli._root import fail, main, terminal_progress, upload_and_report
+from urpt_gcs.drone.link import DEFAULT_URL
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.link import DEFAULT_URL
 
 if TYPE_CHECKING:
     from urpt_gcs.sitl.replay import ReplaySettings
@@ -108,9 +108,9 @@ def _upload_fleet(
     retries: int,
     timeout: float,
 ) -> None:
-    from urpt_gcs.fleet_folder import read_fleet
-    from urpt_gcs.fleet_upload import parse_system_ids, report_lines, upload_fleet
-    from urpt_gcs.link import UploadSettings
+    from urpt_gcs.drone.fleet_upload import parse_system_ids, report_lines, upload_fleet
+    from urpt_gcs.drone.link import UploadSettings
+    from urpt_gcs.outputs.fleet_folder import read_fleet
 
     try:
         fleet = read_fleet(folder)
@@ -361,7 +361,7 @@ def _replay_fleet(
     settings: ReplaySettings,
     progress: Callable[[str], None] | None,
 ) -> None:
-    from urpt_gcs.fleet_folder import read_fleet
+    from urpt_gcs.outputs.fleet_folder import read_fleet
     from urpt_gcs.sitl.fleet import fleet_report_text, replay_fleet
 
     report = replay_fleet(dem, targets, read_fleet(folder), settings, progress)

@@ -30,8 +30,8 @@ import pyproj
 from scipy.ndimage import minimum_filter1d
 
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
-from urpt_gcs.fleet_folder import FleetFolder, FleetVehicle, Separation
 from urpt_gcs.mission import Mission
+from urpt_gcs.outputs.fleet_folder import FleetFolder, FleetVehicle, Separation
 from urpt_gcs.sitl.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sitl.replay import (
     CONNECT_TIMEOUT_S,
@@ -188,7 +188,7 @@ async def _fly_all(
     say: Progress,
     delays_s: Sequence[float],
 ) -> list[Flight]:
-    from urpt_gcs.mavsdk_link import connect
+    from urpt_gcs.drone.mavsdk_link import connect
 
     gate = _TogetherGate(len(missions))
 

@@ -10,7 +10,7 @@ planned home's ground elevation, so the DEM's vertical datum cancels out as in p
 
 What is checked comes with the mission (:func:`expected_checks`): a ``.plan`` urpt-gcs wrote
 names the camera half-angle, the least clearance and the targets of its sortie
-(:class:`~urpt_gcs.formats.qgc_plan.ReplayCheck`); a ``.waypoints`` has no room for them and
+(:class:`~urpt_gcs.outputs.formats.qgc_plan.ReplayCheck`); a ``.waypoints`` has no room for them and
 takes them from the ``summary.json`` beside it, if that describes it; otherwise every target
 of the target file at ``--fov``. A ``--fov`` or ``--min-clearance`` given overrides the plan's,
 with a warning where they differ. Several sorties replayed together are judged each on its
@@ -35,8 +35,8 @@ import numpy.typing as npt
 import pyproj
 
 from urpt_gcs.camera import Frame, grid_bearing_deg
-from urpt_gcs.formats.qgc_plan import read_replay_check
 from urpt_gcs.mission import Mission, photo_headings, waypoint_positions
+from urpt_gcs.outputs.formats.qgc_plan import read_replay_check
 from urpt_gcs.segments import segment_profile
 from urpt_gcs.targets import Target, read_targets
 from urpt_gcs.terrain import WGS84, FloatArray, Terrain, open_dem, planning_crs, read_terrain

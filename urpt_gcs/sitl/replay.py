@@ -4,7 +4,7 @@
 free loopback port; ArduPilot's own ArduCopter SITL, started from ``--ardupilot PATH`` in a
 scratch folder (:mod:`urpt_gcs.sitl.ardupilot_sitl`); or any vehicle at ``--connect``. It
 drives the vehicle as a ground station would, through MAVSDK: the verified upload of
-:mod:`urpt_gcs.link`, parameters, GUIDED, arming, AUTO, and the telemetry the GCS receives
+:mod:`urpt_gcs.drone.link`, parameters, GUIDED, arming, AUTO, and the telemetry the GCS receives
 (GLOBAL_POSITION_INT for the track, CAMERA_FEEDBACK for the photos). :func:`replay` then hands
 the flight to :mod:`urpt_gcs.sitl.judge`.
 
@@ -41,13 +41,13 @@ from mavsdk.plugins.info import InfoError, Version
 from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from urpt_gcs.drone.link import UploadReport, UploadSettings, upload_verified
+from urpt_gcs.drone.mavsdk_link import MavsdkLink, connect
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
-from urpt_gcs.formats import read_plan, read_waypoints
 from urpt_gcs.geofence import Geofence, read_plan_geofence
 from urpt_gcs.inputs import MISSION_FILE_MAX_BYTES, read_capped
-from urpt_gcs.link import UploadReport, UploadSettings, upload_verified
-from urpt_gcs.mavsdk_link import MavsdkLink, connect
 from urpt_gcs.mission import Mission, command_name
+from urpt_gcs.outputs.formats import read_plan, read_waypoints
 from urpt_gcs.sitl.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sitl.params import AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE
 from urpt_gcs.sitl.server import SitlServer

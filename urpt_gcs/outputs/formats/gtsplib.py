@@ -31,7 +31,7 @@ import numpy as np
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 from urpt_gcs.inputs import GTSPLIB_MAX_BYTES, read_capped
-from urpt_gcs.output import check_file, commit
+from urpt_gcs.outputs.output import check_file, commit
 from urpt_gcs.terrain import FloatArray
 from urpt_gcs.visibility import BoolArray
 

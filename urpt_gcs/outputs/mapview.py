@@ -22,8 +22,8 @@ from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.transforms import Affine2D
 
 from urpt_gcs.mission import waypoint_positions
+from urpt_gcs.outputs.report import flight_quality, flown_stops, sortie_colour
 from urpt_gcs.planner import Plan
-from urpt_gcs.report import flight_quality, flown_stops, sortie_colour
 from urpt_gcs.terrain import WGS84, FloatArray, Terrain
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.

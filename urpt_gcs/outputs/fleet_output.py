@@ -16,9 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from urpt_gcs.fleet import FleetPlan
-from urpt_gcs.formats.geo import fleet_geojson, fleet_kml
-from urpt_gcs.output import Destination, commit
-from urpt_gcs.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
+from urpt_gcs.outputs.formats.geo import fleet_geojson, fleet_kml
+from urpt_gcs.outputs.output import Destination, commit
+from urpt_gcs.outputs.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
 
 
 def vehicle_dir(number: int) -> str:
@@ -187,7 +187,7 @@ def write_fleet_products(
     data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed)
     top_files: dict[str, str | bytes] = {**own, SUMMARY_FILE: json.dumps(data, indent=2) + "\n"}
     if with_map:
-        from urpt_gcs.mapview import render_fleet_map
+        from urpt_gcs.outputs.mapview import render_fleet_map
 
         f = data["fleet"]
         gap = "" if f["makespan_gap_pct"] is None else f", gap {f['makespan_gap_pct']:.1f} %"

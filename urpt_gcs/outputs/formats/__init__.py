@@ -7,7 +7,7 @@ text and the file's name (for messages) and return a ``Mission`` or raise
 
 from __future__ import annotations
 
-from urpt_gcs.formats.qgc_plan import plan_json, read_plan
-from urpt_gcs.formats.waypoints import read_waypoints, waypoints_text
+from urpt_gcs.outputs.formats.qgc_plan import plan_json, read_plan
+from urpt_gcs.outputs.formats.waypoints import read_waypoints, waypoints_text
 
 __all__ = ["plan_json", "read_plan", "read_waypoints", "waypoints_text"]

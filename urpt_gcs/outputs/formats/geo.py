@@ -4,8 +4,9 @@ Both hold the same things: every target's visibility region as a polygon, each t
 and each sortie as flown: its route from home through its stops and back home, at the flight
 plane's altitude (in the DEM's vertical datum, which Google Earth takes as height above mean
 sea level), and its stops with their order numbers, what each sees and when the copter gets
-there. Routes and stops are the missions' written waypoints (:func:`urpt_gcs.report.flown_stops`),
-so they are what the vehicle flies. Coordinates are WGS84 longitude/latitude.
+there. Routes and stops are the missions' written waypoints
+(:func:`urpt_gcs.outputs.report.flown_stops`), so they are what the vehicle flies.
+Coordinates are WGS84 longitude/latitude.
 
 Every GeoJSON feature has a ``kind`` property (``region``, ``target``, ``home``, ``stop``,
 ``sortie``); stops carry ``order``, ``sortie``, ``sees`` (target names) and ``eta_s`` (from
@@ -25,8 +26,8 @@ from typing import Any
 import numpy as np
 import pyproj
 
+from urpt_gcs.outputs.report import flown_stops, sortie_colour
 from urpt_gcs.planner import Plan
-from urpt_gcs.report import flown_stops, sortie_colour
 from urpt_gcs.terrain import WGS84, FloatArray
 
 KML_NS = "http://www.opengis.net/kml/2.2"

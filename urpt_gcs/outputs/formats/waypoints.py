@@ -18,7 +18,6 @@ import re
 from decimal import Decimal
 
 from urpt_gcs.errors import MissionFileError, SettingsError
-from urpt_gcs.formats.qgc_plan import assemble_mission, check_item, make_item, show
 from urpt_gcs.mission import (
     DEFAULT_SPEED_M_S,
     FIRMWARES,
@@ -29,6 +28,7 @@ from urpt_gcs.mission import (
     commanded_speed,
     count_problem,
 )
+from urpt_gcs.outputs.formats.qgc_plan import assemble_mission, check_item, make_item, show
 
 HEADER = "QGC WPL 110"
 FIELD_COUNT = 12

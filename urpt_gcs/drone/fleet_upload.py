@@ -2,7 +2,7 @@
 
 Each vehicle is reached on its own connection (one URL per vehicle, in vehicle order), or all
 of them on one link by their MAVLink system ids. Every mission file is read and checked
-before anything is sent; then each vehicle gets :func:`urpt_gcs.link.upload_with_fence`, the
+before anything is sent; then each vehicle gets :func:`urpt_gcs.drone.link.upload_with_fence`, the
 verified upload with read-back. A vehicle either holds its whole mission, verified, or is
 reported as failed with the reason; one vehicle's failure does not stop the others.
 """
@@ -14,11 +14,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from urpt_gcs.drone.link import UploadReport, UploadSettings, refuse_unfit, upload_with_fence
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.fleet_folder import FleetFolder, FleetVehicle
 from urpt_gcs.geofence import Geofence
-from urpt_gcs.link import UploadReport, UploadSettings, refuse_unfit, upload_with_fence
 from urpt_gcs.mission import Mission
+from urpt_gcs.outputs.fleet_folder import FleetFolder, FleetVehicle
 
 Progress = Callable[[str], None]
 
@@ -109,7 +109,7 @@ def upload_fleet(
     Parameters
     ----------
     fleet
-        The fleet plan (:func:`urpt_gcs.fleet_folder.read_fleet`).
+        The fleet plan (:func:`urpt_gcs.outputs.fleet_folder.read_fleet`).
     urls
         One MAVSDK connection string per vehicle, in vehicle order; or one, with
         ``system_ids``.
@@ -169,7 +169,7 @@ async def _one(
     settings: UploadSettings,
     say: Progress,
 ) -> VehicleUpload:
-    from urpt_gcs.mavsdk_link import connect
+    from urpt_gcs.drone.mavsdk_link import connect
 
     mission, fence = load
     prefix = f"{entry.vehicle.name}: "
@@ -215,7 +215,7 @@ async def _by_sysid(
     say: Progress,
     sortie: int,
 ) -> list[VehicleUpload]:
-    from urpt_gcs.mavsdk_link import connect_systems
+    from urpt_gcs.drone.mavsdk_link import connect_systems
 
     entries = [
         _entry(v, f"{url} (system {sysid})", sortie, load is not None)

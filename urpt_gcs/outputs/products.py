@@ -3,8 +3,8 @@
 One sortie: ``mission.plan`` and ``mission.waypoints``; several: ``mission_1.plan``,
 ``mission_1.waypoints``, ``mission_2.plan``, ... Always ``summary.json``, ``plan.kml`` and
 ``plan.geojson``, and ``map.png`` unless the caller asks for none. Each ``.plan`` carries what
-its replay must check (:class:`~urpt_gcs.formats.qgc_plan.ReplayCheck`); a ``.waypoints`` has
-no room for it, and its replay reads ``summary.json`` beside it.
+its replay must check (:class:`~urpt_gcs.outputs.formats.qgc_plan.ReplayCheck`); a
+``.waypoints`` has no room for it, and its replay reads ``summary.json`` beside it.
 
 ``--out`` holds one plan's files: a file of an earlier plan under one of these names
 (:data:`PRODUCT_NAMES`) that this plan does not write is removed with the rest of the earlier
@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 
 from urpt_gcs.errors import OutputError
-from urpt_gcs.formats import plan_json, waypoints_text
-from urpt_gcs.formats.geo import plan_geojson, plan_kml
-from urpt_gcs.formats.qgc_plan import ReplayCheck
-from urpt_gcs.output import Destination, check_file, check_folder, commit
+from urpt_gcs.outputs.formats import plan_json, waypoints_text
+from urpt_gcs.outputs.formats.geo import plan_geojson, plan_kml
+from urpt_gcs.outputs.formats.qgc_plan import ReplayCheck
+from urpt_gcs.outputs.output import Destination, check_file, check_folder, commit
+from urpt_gcs.outputs.report import summary
 from urpt_gcs.planner import Plan
-from urpt_gcs.report import summary
 
 SUMMARY_FILE = "summary.json"
 MAP_FILE = "map.png"
@@ -113,7 +113,7 @@ def render_products(
     data = summary(plan, files=[str(out_dir / n) for n in names])
     files[SUMMARY_FILE] = json.dumps(data, indent=2) + "\n"
     if with_map:
-        from urpt_gcs.mapview import render_map
+        from urpt_gcs.outputs.mapview import render_map
 
         files[MAP_FILE] = render_map(plan, data)
     return data, files

@@ -2,13 +2,13 @@
 
 :func:`upload` connects (MAVSDK 4.x, ``mission_raw``), checks the autopilot against the
 mission's firmware, uploads, downloads the mission back and compares it item by item
-(:mod:`urpt_gcs.readback`). A timeout, a lost link or a read-back that differs restarts the
+(:mod:`urpt_gcs.drone.readback`). A timeout, a lost link or a read-back that differs restarts the
 whole upload, up to ``retries`` more times; success is reported only for a verified read-back.
 Within one attempt, a read-back that gets no answer is read again, and an upload whose
 acceptance never came (:class:`UploadUnconfirmed`) is settled by the read-back alone.
 
 The uploader is written against :class:`VehicleLink`; the real one is
-:class:`urpt_gcs.mavsdk_link.MavsdkLink`, loaded only when a link is opened.
+:class:`urpt_gcs.drone.mavsdk_link.MavsdkLink`, loaded only when a link is opened.
 Errors are :class:`~urpt_gcs.errors.LinkError`; a refusal by the vehicle is
 :class:`MissionRejected`, which names the MISSION_ACK result (``MAV_MISSION_NO_SPACE``...).
 
@@ -31,6 +31,7 @@ from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Protocol
 
+from urpt_gcs.drone.readback import WireItem, compare, wire_items
 from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.geofence import Geofence, compare_fence, fence_items
 from urpt_gcs.mission import (
@@ -41,7 +42,6 @@ from urpt_gcs.mission import (
     command_name,
     upload_problem,
 )
-from urpt_gcs.readback import WireItem, compare, wire_items
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
 READBACK_S_PER_ITEM = 1.0
@@ -589,7 +589,7 @@ async def upload_async(
     settings = settings or UploadSettings()
     say = progress or (lambda _msg: None)
     refuse_unfit(mission)  # before a connection is even tried
-    from urpt_gcs.mavsdk_link import connect
+    from urpt_gcs.drone.mavsdk_link import connect
 
     say(f"waiting for an autopilot on {url}")
     async with connect(url, settings.timeout_s) as link:

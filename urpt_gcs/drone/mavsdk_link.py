@@ -1,4 +1,4 @@
-"""MAVSDK 4.x as the drone link: :class:`MavsdkLink`, a :class:`~urpt_gcs.link.VehicleLink`.
+"""MAVSDK 4.x as the drone link: :class:`MavsdkLink`, a :class:`~urpt_gcs.drone.link.VehicleLink`.
 
 Missions go through ``mission_raw`` (items exactly as given, no home added or removed).
 ``mavlink_direct`` watches MISSION_ACK and STATUSTEXT during an upload, so a refusal is
@@ -8,7 +8,7 @@ ArduPilot's explanation ("Only 700 items are supported"). MAVSDK's log goes to t
 
 On a lossy link (see :data:`UPLOAD_TIMEOUT_S`) MAVSDK's answer timeout is raised for uploads,
 and an upload whose every item the vehicle asked for but whose acceptance never came is
-reported as :class:`~urpt_gcs.link.UploadUnconfirmed`, for the read-back to settle.
+reported as :class:`~urpt_gcs.drone.link.UploadUnconfirmed`, for the read-back to settle.
 """
 
 from __future__ import annotations
@@ -33,9 +33,7 @@ from mavsdk.plugins.mission_raw import MissionItem as MavsdkItem
 from mavsdk.plugins.mission_raw import MissionPlan, MissionRawError, MissionRawResult
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.errors import LinkError
-from urpt_gcs.geofence import FENCE_TYPE
-from urpt_gcs.link import (
+from urpt_gcs.drone.link import (
     DEFAULT_URL,
     AutopilotKind,
     FenceRefused,
@@ -43,7 +41,9 @@ from urpt_gcs.link import (
     MissionRejected,
     UploadUnconfirmed,
 )
-from urpt_gcs.readback import WireItem
+from urpt_gcs.drone.readback import WireItem
+from urpt_gcs.errors import LinkError
+from urpt_gcs.geofence import FENCE_TYPE
 
 # ArduPilot sends its explanation (STATUSTEXT) just after the MISSION_ACK.
 REFUSAL_TEXT_WAIT_S = 0.3

@@ -1,0 +1,1 @@
+"""The drone link: MAVSDK connections, verified uploads with read-back, and fleet uploads."""

@@ -1,0 +1,2 @@
+"""What a plan writes: mission files (``formats``), the map, the summary, the KML/GeoJSON
+products, the fleet folder, and writing them as one set."""
