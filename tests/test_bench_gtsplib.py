@@ -182,7 +182,9 @@ def test_plan_export_is_read_back_by_bench(tmp_path: Path) -> None:
         [*plan, "--out", str(tmp_path / "bad"), "--fov", "95", "--export-gtsp", str(exported)]
     )
     assert failed.exit_code == 1 and not exported.parent.exists()
-    export = ["--export-gtsp", str(exported)]
+    # Tolerance 0: the bound is then for every flight that sees the targets, the exported
+    # candidates' tours among them (with a tolerance it is for stops that hold it).
+    export = ["--export-gtsp", str(exported), "--position-tolerance", "0"]
     result = _cli([*plan, "--out", str(tmp_path / "out"), "--time-limit", "1", "--json", *export])
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in exported.parent.iterdir()) == ["demo.gtsp"]

@@ -241,7 +241,8 @@ def test_several_system_ids_on_one_link(fleet2: Path) -> None:
 def independent_closest(flights: list[Flight], homes_amsl: list[float]) -> float:
     """Closest 3-D approach at equal times, by a computation of its own: each position at
     the time it arrived (no delay model), on a local flat earth, the other track
-    interpolated at each sample time."""
+    interpolated at each sample time; two vehicles from one home (their first fixes within
+    1 m) are compared only while both fly, since they use its pad in turn."""
     lat0 = flights[0].track[0].lat_deg
     metres_lat = 111_132.954 - 559.822 * math.cos(2 * math.radians(lat0))
     metres_lon = 111_412.84 * math.cos(math.radians(lat0))
@@ -264,7 +265,9 @@ def independent_closest(flights: list[Flight], homes_amsl: list[float]) -> float
             (ta, pa, ra), (tb, pb, rb) = tracks[i], tracks[j]
             inside = (ta >= tb[0]) & (ta <= tb[-1])
             other = np.column_stack([np.interp(ta[inside], tb, pb[:, k]) for k in range(3)])
-            flying = (ra[inside] > 1.0) | (np.interp(ta[inside], tb, rb) > 1.0)
+            up_a, up_b = ra[inside] > 1.0, np.interp(ta[inside], tb, rb) > 1.0
+            one_pad = np.linalg.norm(pa[0, :2] - pb[0, :2]) <= 1.0
+            flying = (up_a & up_b) if one_pad else (up_a | up_b)
             gaps = np.linalg.norm(pa[inside] - other, axis=1)[flying]
             if gaps.size:
                 best = min(best, float(gaps.min()))
@@ -344,6 +347,42 @@ def test_a_fleet_replays_on_arducopter_sitl(fleet2: Path) -> None:
     for flight in flights:  # every SITL we started has stopped
         pid = int(flight.vehicle.where.split("pid ")[1].split(",")[0])
         assert not Path(f"/proc/{pid}").exists() or _zombie(pid)
+
+
+@pytest.fixture(scope="module")
+def planned2(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The planner's own fleet of two for the demo: one home, layers 10 m apart."""
+    out = tmp_path_factory.mktemp("planned2") / "out"
+    args = ["plan", "--dem", str(SITE), "--targets", str(TARGETS), "--out", str(out)]
+    result = CliRunner().invoke(main, [*args, "--vehicles", "2", "--time-limit", "2", "--no-map"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _replay_planned(fleet: Path, settings: ReplaySettings) -> None:
+    report = replay_fleet(SITE, TARGETS, read_fleet(fleet), settings)
+    from urpt_gcs.sitl.fleet import fleet_report_text
+
+    print(fleet_report_text(report).split("\n\nfleet: ")[-1])
+    assert report.ok, (report.problems, report.together.problems)
+    _check_targets_independently(report)
+    flights = [r.flight for r in report.together.reports]
+    homes = [r.home_amsl_m for r in report.together.reports]
+    assert report.approach is not None and report.approach.distance_m >= 8.0
+    assert report.approach.distance_m == pytest.approx(independent_closest(flights, homes), abs=1.5)
+    delays = [v.start_delay_s for v in read_fleet(fleet).vehicles]
+    assert max(delays) > 0.0  # one home: the plan staggers the take-offs, the replay keeps them
+
+
+def test_the_planners_fleet_replays_on_simulated_copters(planned2: Path) -> None:
+    _replay_planned(planned2, ReplaySettings(speedup=50.0))
+
+
+@pytest.mark.sitl_real
+@pytest.mark.skipif(not os.access(BINARY, os.X_OK), reason=f"no ArduCopter SITL at {BINARY}")
+def test_the_planners_fleet_replays_on_arducopter_sitl(planned2: Path) -> None:
+    """``plan --vehicles 2`` flown on two ArduCopter SITL instances; prints what it measured."""
+    _replay_planned(planned2, ReplaySettings(speedup=20.0, ardupilot=BINARY))
 
 
 def _zombie(pid: int) -> bool:
