@@ -327,28 +327,6 @@ def test_the_replay_command_fails_on_crossing_tracks(crossing: Path) -> None:
     assert result.stderr.startswith("urpt-gcs: error: fleet replay failed: vehicles 1 and 2")
 
 
-@pytest.mark.sitl_real
-@pytest.mark.skipif(not os.access(BINARY, os.X_OK), reason=f"no ArduCopter SITL at {BINARY}")
-def test_a_fleet_replays_on_arducopter_sitl(fleet2: Path) -> None:
-    """Two ArduCopter SITL instances at once, each at its home; prints what it measured."""
-    settings = ReplaySettings(speedup=20.0, ardupilot=BINARY)
-    report = replay_fleet(SITE, TARGETS, read_fleet(fleet2), settings)
-    from urpt_gcs.sitl.fleet import fleet_report_text
-
-    print(fleet_report_text(report).split("\n\nfleet: ")[-1])
-    assert report.ok, (report.problems, report.together.problems)
-    _check_targets_independently(report)
-    flights = [r.flight for r in report.together.reports]
-    homes = [r.home_amsl_m for r in report.together.reports]
-    assert report.approach is not None and report.approach.distance_m >= 8.0
-    assert report.approach.distance_m == pytest.approx(independent_closest(flights, homes), abs=1.5)
-    assert all("ArduCopter SITL" in f.vehicle.where for f in flights)
-    assert len({f.vehicle.where for f in flights}) == 2
-    for flight in flights:  # every SITL we started has stopped
-        pid = int(flight.vehicle.where.split("pid ")[1].split(",")[0])
-        assert not Path(f"/proc/{pid}").exists() or _zombie(pid)
-
-
 @pytest.fixture(scope="module")
 def planned2(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The planner's own fleet of two for the demo: one home, layers 10 m apart."""
@@ -359,7 +337,7 @@ def planned2(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def _replay_planned(fleet: Path, settings: ReplaySettings) -> None:
+def _replay_planned(fleet: Path, settings: ReplaySettings) -> list[Flight]:
     report = replay_fleet(SITE, TARGETS, read_fleet(fleet), settings)
     from urpt_gcs.sitl.fleet import fleet_report_text
 
@@ -372,6 +350,7 @@ def _replay_planned(fleet: Path, settings: ReplaySettings) -> None:
     assert report.approach.distance_m == pytest.approx(independent_closest(flights, homes), abs=1.5)
     delays = [v.start_delay_s for v in read_fleet(fleet).vehicles]
     assert max(delays) > 0.0  # one home: the plan staggers the take-offs, the replay keeps them
+    return flights
 
 
 def test_the_planners_fleet_replays_on_simulated_copters(planned2: Path) -> None:
@@ -382,7 +361,12 @@ def test_the_planners_fleet_replays_on_simulated_copters(planned2: Path) -> None
 @pytest.mark.skipif(not os.access(BINARY, os.X_OK), reason=f"no ArduCopter SITL at {BINARY}")
 def test_the_planners_fleet_replays_on_arducopter_sitl(planned2: Path) -> None:
     """``plan --vehicles 2`` flown on two ArduCopter SITL instances; prints what it measured."""
-    _replay_planned(planned2, ReplaySettings(speedup=20.0, ardupilot=BINARY))
+    flights = _replay_planned(planned2, ReplaySettings(speedup=20.0, ardupilot=BINARY))
+    assert all("ArduCopter SITL" in f.vehicle.where for f in flights)
+    assert len({f.vehicle.where for f in flights}) == 2
+    for flight in flights:  # every SITL we started has stopped
+        pid = int(flight.vehicle.where.split("pid ")[1].split(",")[0])
+        assert not Path(f"/proc/{pid}").exists() or _zombie(pid)
 
 
 def _zombie(pid: int) -> bool:
