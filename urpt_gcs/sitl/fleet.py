@@ -297,13 +297,18 @@ def _takeoff(track: _Track | None) -> int | None:
     return int(np.argmax(track.rel_m > ON_GROUND_M))
 
 
-def _same_pad(a: _Track, b: _Track) -> bool:
-    """Whether two tracks start from one home (within :data:`SAME_PAD_M`)."""
-    return bool(np.linalg.norm(a.ecef[0] - b.ecef[0]) <= SAME_PAD_M)
+def _same_pad(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    """Whether two planned homes (lat, lon) are one pad (within :data:`SAME_PAD_M`): the
+    missions' homes, not the first fixes, which a simulator's GPS places a little apart."""
+    north = (a[0] - b[0]) * 111_132.0
+    east = (a[1] - b[1]) * 111_320.0 * math.cos(math.radians(a[0]))
+    return math.hypot(north, east) <= SAME_PAD_M
 
 
 def closest_approach(
-    flights: Sequence[Flight], homes_amsl_m: Sequence[float]
+    flights: Sequence[Flight],
+    homes_amsl_m: Sequence[float],
+    pads: Sequence[tuple[float, float]] | None = None,
 ) -> tuple[Approach | None, tuple[float, ...]]:
     """The closest 3-D approach of any two vehicles at equal times, while at least one of
     them flies (both, for two from one home: they use its pad in turn); and each vehicle's
@@ -335,7 +340,8 @@ def closest_approach(
             up_a, up_b = a.at(a.rel_m, times) > ON_GROUND_M, b.at(b.rel_m, times) > ON_GROUND_M
             # Vehicles sharing a home share its pad and take off and land there in turn (as
             # planned, by their start delays): the one waiting is not on the pad.
-            flying = (up_a & up_b) if _same_pad(a, b) else (up_a | up_b)
+            one_pad = pads is not None and _same_pad(pads[i], pads[j])
+            flying = (up_a & up_b) if one_pad else (up_a | up_b)
             if not flying.any():
                 continue
             gap = np.linalg.norm(a.position(times) - b.position(times), axis=1)
@@ -401,7 +407,11 @@ def replay_fleet(
         for flight, mission, exp, v in zip(flights, missions, expected, fleet.vehicles, strict=True)
     ]
     together = judge_set(reports, dem_path, targets_path)
-    approach, takeoff = closest_approach(flights, [m.home.amsl_m for m in missions])
+    approach, takeoff = closest_approach(
+        flights,
+        [m.home.amsl_m for m in missions],
+        [(m.home.lat_deg, m.home.lon_deg) for m in missions],
+    )
     required = required_separation_m(fleet.separation)
     problems = []
     if approach is None:
