@@ -637,6 +637,28 @@ def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int)
 
 
 @nb.njit(cache=True)
+def _insert_cheapest(
+    seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, m: int, d: int
+) -> int:
+    """Insert disc ``d`` into the tour of the first ``m`` stops at its cheapest place (free
+    where a leg already crosses it), shifting the stops after it; its index."""
+    cur = pts[:m]
+    best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
+    for j in range(-1, m):
+        cost, px, py = _insert_cost(cur, ends, discs, d, j)
+        if cost < best:
+            best, best_j, best_x, best_y = cost, j, px, py
+    for k in range(m, best_j + 1, -1):
+        seq[k] = seq[k - 1]
+        pts[k, 0] = pts[k - 1, 0]
+        pts[k, 1] = pts[k - 1, 1]
+    seq[best_j + 1] = d
+    pts[best_j + 1, 0] = best_x
+    pts[best_j + 1, 1] = best_y
+    return best_j + 1
+
+
+@nb.njit(cache=True)
 def _ruin(
     seq: IntArray,
     pts: FloatArray,
@@ -660,22 +682,10 @@ def _ruin(
             m += 1
     first, last = n, -1
     for d in removed:
-        cur = pts[:m]
-        best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
-        for j in range(-1, m):
-            cost, px, py = _insert_cost(cur, ends, discs, d, j)
-            if cost < best:
-                best, best_j, best_x, best_y = cost, j, px, py
-        for k in range(m, best_j + 1, -1):
-            seq[k] = seq[k - 1]
-            pts[k, 0] = pts[k - 1, 0]
-            pts[k, 1] = pts[k - 1, 1]
-        seq[best_j + 1] = d
-        pts[best_j + 1, 0] = best_x
-        pts[best_j + 1, 1] = best_y
+        at = _insert_cheapest(seq, pts, discs, ends, m, d)
         m += 1
-        first = min(first, best_j + 1)
-        last = max(last, best_j + 1)
+        first = min(first, at)
+        last = max(last, at)
     for k in range(n):
         pos[seq[k]] = k
     return first, last
@@ -725,19 +735,7 @@ def _put_back(
     """Put the discs ``taken`` back into the tour of the first ``m`` stops, each at its
     cheapest place (free where a leg already crosses it)."""
     for d in taken:
-        cur = pts[:m]
-        best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
-        for j in range(-1, m):
-            cost, px, py = _insert_cost(cur, ends, discs, d, j)
-            if cost < best:
-                best, best_j, best_x, best_y = cost, j, px, py
-        for k in range(m, best_j + 1, -1):
-            seq[k] = seq[k - 1]
-            pts[k, 0] = pts[k - 1, 0]
-            pts[k, 1] = pts[k - 1, 1]
-        seq[best_j + 1] = d
-        pts[best_j + 1, 0] = best_x
-        pts[best_j + 1, 1] = best_y
+        _insert_cheapest(seq, pts, discs, ends, m, d)
         m += 1
     for k in range(m):
         pos[seq[k]] = k
