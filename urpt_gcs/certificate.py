@@ -42,9 +42,7 @@ class Certificate:
     ``lower_bound_m`` bounds every closed flight from ``depot`` (home; none: any closed
     flight) on the plane whose photos see every target; ``method`` and ``seconds`` say how
     the bound was reached, ``area_ratio`` how much wider the outer stars are than what is
-    certainly seen (their areas, summed over the targets). ``found_m`` is the bound as
-    found, before it is capped at the flight's length (above it would mean the bound is
-    wrong: the flight is a flight too).
+    certainly seen (their areas, summed over the targets).
     """
 
     lower_bound_m: float
@@ -52,7 +50,6 @@ class Certificate:
     seconds: float
     sectors: int
     area_ratio: float
-    found_m: float = math.nan
 
     def gap(self, length_m: float) -> float:
         """``(length - bound) / bound``: how much longer the flight may be than the shortest."""
@@ -160,7 +157,7 @@ def certify(
     if also_m > value:
         value, method = also_m, "geometric"
     sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
-    return Certificate(min(value, length_m), method, bound.seconds, sectors, area_ratio, value)
+    return Certificate(min(value, length_m), method, bound.seconds, sectors, area_ratio)
 
 
 def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:
