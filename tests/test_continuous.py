@@ -14,7 +14,7 @@ from shapely.geometry import LineString, Point
 from urpt_gcs.bench.cetsp import COLUMNS, read_instance, read_published
 from urpt_gcs.cli import main
 from urpt_gcs.solvers.base import SolveSettings
-from urpt_gcs.solvers.continuous import solve_regions
+from urpt_gcs.solvers.continuous import _from_relaxed, solve_regions
 from urpt_gcs.solvers.disc_tour import exact_positions, improve
 from urpt_gcs.solvers.refine import best_on_disc, closed_length, refine_touches
 from urpt_gcs.solvers.regions import RegionSet
@@ -63,6 +63,28 @@ def test_solve_regions_enters_every_disc_and_brackets_the_optimum() -> None:
     assert tour.length <= polygon * 1.001
     assert tour.length <= tour.discrete_length + 1e-9
     assert 0.0 < tour.lower_bound <= tour.length
+
+
+def test_a_polyline_through_every_disc_becomes_a_tour_no_longer() -> None:
+    # A square from the depot; discs at its corners, on its sides (crossed, not visited)
+    # and one the square misses.
+    square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+    discs = np.array(
+        [[10.5, 0.0, 1.0], [5.0, 10.8, 1.0], [-0.5, 4.0, 0.6], [9.0, 9.0, 2.0], [3.0, -0.999, 1.0]]
+    )
+    regions = RegionSet(discs=discs, depot_xy=(0.0, 0.0))
+    got = _from_relaxed(regions, np.roll(square, 2, axis=0))
+    assert got is not None
+    seq, pts = got
+    assert sorted(seq.tolist()) == list(range(len(discs)))
+    assert np.all(np.hypot(*(pts - discs[seq, :2]).T) <= discs[seq, 2])
+    # From the depot round the square: the bottom side's discs first, the left side's last.
+    assert seq[0] == 4 and seq[-1] == 2
+    assert closed_length(pts, regions.depot_xy) <= 40.0 + 1e-9
+    missed = RegionSet(discs=np.vstack([discs, [[5.0, 5.0, 1.0]]]), depot_xy=(0.0, 0.0))
+    assert _from_relaxed(missed, square) is None
+    # A polyline that does not pass through the depot is no tour from it.
+    assert _from_relaxed(regions, square + 0.5) is None
 
 
 def test_bench_cetsp_writes_the_columns(tmp_path) -> None:  # type: ignore[no-untyped-def]

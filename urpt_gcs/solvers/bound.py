@@ -474,6 +474,8 @@ class Bound:
     # The shortest closed polyline the order search met that meets every set it bounded:
     # a tour of the problem itself for discs and for polygons bounded with exact_shapes.
     relaxed_tour_m: float = math.inf
+    # That polyline's points, in order (None when the search met none).
+    relaxed_tour_xy: FloatArray | None = None
 
 
 def lower_bound(
@@ -609,5 +611,5 @@ def _order(
     found = order_bound(stars, regions.depot_xy, upper, time_limit_s, gap_target, shapes)
     return Bound(
         found.value, "order", 0, 0, time.perf_counter() - started,
-        found.nodes, found.open_nodes, found.finished, found.leaf_length,
+        found.nodes, found.open_nodes, found.finished, found.leaf_length, found.leaf_xy,
     )  # fmt: skip

@@ -183,6 +183,11 @@ def solve_regions(
         raise PlanError("internal check failed: a refined tour left a region; report this")
     left = max(settings.time_limit_s - (time.perf_counter() - started), 0.05)
     bound = lower_bound(regions, best_len, left, gap_target)
+    # For discs the bound's search meets real tours: the shortest it met may beat ours.
+    relaxed = _from_relaxed(regions, bound.relaxed_tour_xy)
+    if relaxed is not None and closed_length(relaxed[1], regions.depot_xy) < best_len:
+        best_seq, best_pts = relaxed
+        best_len = closed_length(best_pts, regions.depot_xy)
     return ContinuousTour(
         points_xy=stops(best_pts),
         touch_region=best_seq,
@@ -195,6 +200,46 @@ def solve_regions(
         optimal_over_candidates=first.proven_optimal,
         solve_s=time.perf_counter() - started,
     )
+
+
+def _from_relaxed(
+    regions: RegionSet, polyline_xy: FloatArray | None
+) -> tuple[IntArray, FloatArray] | None:
+    """The touches of a closed polyline that meets every disc (the bound's shortest), or
+    None where it misses one: each disc entered at the polyline's point nearest its centre,
+    in the order the polyline (from the depot, if any) reaches them. Joining those points
+    in that order is no longer than the polyline."""
+    if regions.discs is None or polyline_xy is None or len(polyline_xy) < 2:
+        return None
+    poly = np.asarray(polyline_xy, dtype=np.float64)
+    if regions.depot_xy is not None:
+        home = np.hypot(*(poly - np.asarray(regions.depot_xy)).T)
+        at = int(np.argmin(home))
+        if home[at] > 1e-9 * (1.0 + float(np.abs(poly).max())):
+            return None
+        poly = np.roll(poly, -at, axis=0)
+        poly[0] = regions.depot_xy
+    a, b = poly, np.roll(poly, -1, axis=0)
+    d = b - a
+    ll = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
+    c, r = regions.discs[:, :2], regions.discs[:, 2]
+    # Each centre's nearest point on each segment: (discs, segments).
+    t = np.clip(np.einsum("kij,ij->ki", c[:, None, :] - a[None], d) / ll, 0.0, 1.0)
+    near = a[None] + t[..., None] * d[None]
+    dist = np.hypot(*(near - c[:, None, :]).transpose(2, 0, 1))
+    seg = np.argmin(dist, axis=1)
+    k = np.arange(len(c))
+    pts, far = near[k, seg], dist[k, seg]
+    if np.any(far > r * (1.0 + 1e-9)):
+        return None
+    # On the rim to rounding: a hair inside.
+    rim = far > r * (1.0 - 1e-12)
+    pts[rim] = c[rim] + (pts[rim] - c[rim]) * (r[rim] * (1.0 - 1e-12) / far[rim])[:, None]
+    order = np.lexsort((t[k, seg], seg))
+    seq, pts = k[order].astype(np.int64), pts[order]
+    if not regions.contains(pts, seq).all():
+        return None
+    return seq, pts
 
 
 def _refine(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:

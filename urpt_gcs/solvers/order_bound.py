@@ -491,6 +491,9 @@ class OrderBound:
     # The shortest closed polyline met that meets every set searched (the stars, or the
     # shapes where given): a real tour when those are the regions themselves.
     leaf_length: float = math.inf
+    # That polyline's points in order, and the region (index into ``stars``) of each.
+    leaf_xy: FloatArray | None = None
+    leaf_regions: I64 | None = None
 
 
 @dataclass(slots=True)
@@ -560,6 +563,7 @@ def order_bound(
         heap.append((root.cert, 0, root))
     finished = True
     leaf = math.inf
+    leaf_node: _Node | None = None
     while heap:
         if heap[0][0] >= prune_at:
             break
@@ -572,7 +576,8 @@ def order_bound(
         if ways is None:
             # Every region met: this node's value bounds all its completions.
             closed = min(closed, node.cert)
-            leaf = min(leaf, node.primal)
+            if node.primal < leaf:
+                leaf, leaf_node = node.primal, node
             continue
         for way in ways:
             for child in way:
@@ -589,7 +594,14 @@ def order_bound(
     open_low = heap[0][0] if heap else math.inf
     value = min(closed, open_low, upper)
     seconds = time.perf_counter() - started
-    return OrderBound(max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf)
+    leaf_xy = leaf_regions = None
+    if leaf_node is not None:
+        leaf_xy = np.column_stack([leaf_node.px, leaf_node.py])
+        leaf_regions = sets.region_of[leaf_node.seq]
+    return OrderBound(
+        max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf,
+        leaf_xy, leaf_regions,
+    )  # fmt: skip
 
 
 def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float) -> None:
