@@ -513,8 +513,15 @@ def _interrupt(tmp_path: Path, when: str, env: dict[str, str] | None = None) -> 
 
     args = [str(_installed()), "plan", "--dem", str(DEMO / "site.tif")]
     args += ["--targets", str(DEMO / "targets.kml"), "--out", str(tmp_path / "out"), "--no-map"]
+    # A terminal never ignores Ctrl-C; a shell's background job (how a runner may start the
+    # suite) does, and the child would inherit that.
     process = subprocess.Popen(
-        args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+        args,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     maps = Path(f"/proc/{process.pid}/maps")
     if when == "during import":

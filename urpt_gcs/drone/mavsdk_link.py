@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ctypes
+import functools
 import json
 import logging
 import time
@@ -87,7 +88,10 @@ _log = logging.getLogger("urpt_gcs.mavsdk")
 _log.addHandler(logging.NullHandler())
 
 
+@functools.cache
 def _route_mavsdk_logs() -> None:
+    """Send MAVSDK's log to ours, once per process: subscribing again frees the callback
+    the library may be inside on another thread (a crash, seen with a fleet connecting)."""
     from mavsdk.logging import LogLevel, log_subscribe
 
     levels = {
