@@ -44,6 +44,8 @@ _DISC_ROUNDS = 2
 _DISC_DISCRETE_SHARE = 0.5
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
+# Disc-segment pairs per block when a polyline's touches are found.
+_BLOCK_ELEMENTS = 1 << 18
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,9 +187,10 @@ def solve_regions(
     bound = lower_bound(regions, best_len, left, gap_target)
     # For discs the bound's search meets real tours: the shortest it met may beat ours.
     relaxed = _from_relaxed(regions, bound.relaxed_tour_xy)
-    if relaxed is not None and closed_length(relaxed[1], regions.depot_xy) < best_len:
-        best_seq, best_pts = relaxed
-        best_len = closed_length(best_pts, regions.depot_xy)
+    if relaxed is not None:
+        length = closed_length(relaxed[1], regions.depot_xy)
+        if length < best_len:
+            best_len, (best_seq, best_pts) = length, relaxed
     return ContinuousTour(
         points_xy=stops(best_pts),
         touch_region=best_seq,
@@ -219,23 +222,30 @@ def _from_relaxed(
             return None
         poly = np.roll(poly, -at, axis=0)
         poly[0] = regions.depot_xy
-    a, b = poly, np.roll(poly, -1, axis=0)
-    d = b - a
+    a = poly
+    d = np.roll(poly, -1, axis=0) - a
     ll = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
     c, r = regions.discs[:, :2], regions.discs[:, 2]
-    # Each centre's nearest point on each segment: (discs, segments).
-    t = np.clip(np.einsum("kij,ij->ki", c[:, None, :] - a[None], d) / ll, 0.0, 1.0)
-    near = a[None] + t[..., None] * d[None]
-    dist = np.hypot(*(near - c[:, None, :]).transpose(2, 0, 1))
-    seg = np.argmin(dist, axis=1)
     k = np.arange(len(c))
-    pts, far = near[k, seg], dist[k, seg]
+    seg, along = np.empty(len(c), dtype=np.int64), np.empty(len(c))
+    pts, far = np.empty((len(c), 2)), np.empty(len(c))
+    # Each centre's nearest point on every segment, a block of discs at a time (memory).
+    step = max(1, _BLOCK_ELEMENTS // len(a))
+    for lo in range(0, len(c), step):
+        cc = c[lo : lo + step]
+        t = np.clip(np.einsum("kij,ij->ki", cc[:, None, :] - a[None], d) / ll, 0.0, 1.0)
+        near = a[None] + t[..., None] * d[None]
+        dist = np.hypot(*(near - cc[:, None, :]).transpose(2, 0, 1))
+        j = np.argmin(dist, axis=1)
+        i = np.arange(len(cc))
+        seg[lo : lo + step], along[lo : lo + step] = j, t[i, j]
+        pts[lo : lo + step], far[lo : lo + step] = near[i, j], dist[i, j]
     if np.any(far > r * (1.0 + 1e-9)):
         return None
     # On the rim to rounding: a hair inside.
     rim = far > r * (1.0 - 1e-12)
     pts[rim] = c[rim] + (pts[rim] - c[rim]) * (r[rim] * (1.0 - 1e-12) / far[rim])[:, None]
-    order = np.lexsort((t[k, seg], seg))
+    order = np.lexsort((along, seg))
     seq, pts = k[order].astype(np.int64), pts[order]
     if not regions.contains(pts, seq).all():
         return None

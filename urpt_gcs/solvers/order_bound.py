@@ -491,9 +491,8 @@ class OrderBound:
     # The shortest closed polyline met that meets every set searched (the stars, or the
     # shapes where given): a real tour when those are the regions themselves.
     leaf_length: float = math.inf
-    # That polyline's points in order, and the region (index into ``stars``) of each.
+    # That polyline's points, in order.
     leaf_xy: FloatArray | None = None
-    leaf_regions: I64 | None = None
 
 
 @dataclass(slots=True)
@@ -594,14 +593,10 @@ def order_bound(
     open_low = heap[0][0] if heap else math.inf
     value = min(closed, open_low, upper)
     seconds = time.perf_counter() - started
-    leaf_xy = leaf_regions = None
-    if leaf_node is not None:
-        leaf_xy = np.column_stack([leaf_node.px, leaf_node.py])
-        leaf_regions = sets.region_of[leaf_node.seq]
+    leaf_xy = None if leaf_node is None else np.column_stack([leaf_node.px, leaf_node.py])
     return OrderBound(
-        max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf,
-        leaf_xy, leaf_regions,
-    )  # fmt: skip
+        max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf, leaf_xy
+    )
 
 
 def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float) -> None:
