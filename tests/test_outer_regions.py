@@ -123,8 +123,8 @@ def test_no_seeing_point_outside_the_outer_star_none_unseen_inside_the_inner(see
 
 
 def test_outer_star_follows_the_terrain_closely() -> None:
-    """On the paper's TIN terrain the outer star's area is within 2 % of the largest exact
-    reach over each sector (eight rays per sector), and holds it."""
+    """On the paper's TIN terrain the outer star's area is within 1 % of the largest reach
+    over each sector (eight rays per sector), and just beyond it every ray is blocked."""
     from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
 
     terrain = tin_terrain(0)
@@ -135,6 +135,21 @@ def test_outer_star_follows_the_terrain_closely() -> None:
     outer, inner = star_reach(terrain, targets, ground, camera, sectors)
     rays = ray_reach(terrain, targets, ground, camera, azimuths(sectors * 8) + 1e-9)
     widest = rays.reshape(len(targets), sectors, 8).max(axis=2)
-    assert np.all(outer >= widest - 1e-9)
-    assert np.sum(outer**2) <= 1.02 * np.sum(widest**2)
+    assert np.sum(outer**2) <= 1.01 * np.sum(widest**2)
+    # The planner's line of sight (exact on the bilinear surface) is the judge: a hair beyond
+    # the outer reach, on each ray of the sector, the target is hidden or out of the cone.
+    az = azimuths(sectors * 8) + 1e-9
+    beyond = np.repeat(outer, 8, axis=1) * (1.0 + 1e-9) + 1e-6
+    cone = camera.cone_radius_m(ground)[:, None]
+    k, j = np.nonzero(beyond < cone)
+    eye = np.column_stack(
+        [
+            targets[k, 0] + beyond[k, j] * np.cos(az[j]),
+            targets[k, 1] + beyond[k, j] * np.sin(az[j]),
+            np.full(k.size, ALTITUDE),
+        ]
+    )
+    at = np.column_stack([targets[k], ground[k]])
+    assert k.size > 1000
+    assert not np.any(line_of_sight(terrain, eye, at)), "a ray sees beyond the outer star"
     assert np.sum(outer**2) <= 2.5 * np.sum(inner**2)

@@ -50,6 +50,9 @@ class Certificate:
     seconds: float
     sectors: int
     area_ratio: float
+    # The bound's shortest relaxed tour: a closed polyline meeting every outer star it
+    # bounded (None when the search met none), from which a tour may be read.
+    relaxed_tour_xy: FloatArray | None = None
 
     def gap(self, length_m: float) -> float:
         """``(length - bound) / bound``: how much longer the flight may be than the shortest."""
@@ -157,7 +160,9 @@ def certify(
     if also_m > value:
         value, method = also_m, "geometric"
     sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
-    return Certificate(min(value, length_m), method, bound.seconds, sectors, area_ratio)
+    return Certificate(
+        min(value, length_m), method, bound.seconds, sectors, area_ratio, bound.relaxed_tour_xy
+    )
 
 
 def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:

@@ -147,6 +147,15 @@ def _feasible(
     prof = segment_profile(site.terrain, start, end, site.workers)
     legs_ok = (prof.unknown_fraction == 0.0) & (prof.excess_m <= -site.min_clearance_m)
     ok &= legs_ok.reshape(len(starts), n).all(axis=0)
+    return ok & _sees_all(site, cand, sees & ok[:, None], heading)
+
+
+def _sees_all(
+    site: Site, cand: FloatArray, sees: BoolArray, heading: FloatArray | None
+) -> BoolArray:
+    """Whether each candidate stop sees every target of its row of ``sees`` from all of the
+    ring of ``site.tolerance_m`` around it, from itself, and from its position as written."""
+    cam = site.camera
     # Every target from the ring around the candidate (and from the candidate itself).
     angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
     offsets = np.vstack(
@@ -154,7 +163,7 @@ def _feasible(
     )
     if site.tolerance_m <= 0.0:
         offsets = offsets[:1]
-    stop, target = np.nonzero(sees & ok[:, None])
+    stop, target = np.nonzero(sees)
     eye = (cand[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
     pair_stop = np.repeat(stop, len(offsets))
     pair_target = np.repeat(target, len(offsets))
@@ -170,10 +179,9 @@ def _feasible(
     e3 = np.column_stack([eye[seen], np.full(int(seen.sum()), cam.altitude_m)])
     t3 = np.column_stack([tx[seen], tg[seen]])
     seen[seen] = line_of_sight(site.terrain, e3, t3, site.workers)
-    failed = np.zeros(n, dtype=bool)
+    failed = np.zeros(len(cand), dtype=bool)
     failed[pair_stop[~seen]] = True
-    ok &= ~failed
-    return ok
+    return ~failed
 
 
 def refine_tour(
@@ -251,6 +259,109 @@ def refine_tour(
         notes=(*tour.notes, f"stops moved within their regions: {before:.1f} m -> {after:.1f} m"),
     )
     return refined, Refinement(before, after, moves, sweeps, time.perf_counter() - started)
+
+
+def tour_along(
+    site: Site,
+    polyline_xy: FloatArray,
+    depot_xy: tuple[float, float] | None,
+    like: Tour,
+) -> Tour | None:
+    """A tour read off a closed polyline that meets every target's region (the certified
+    bound's shortest relaxed tour): each target is seen from the polyline's sample nearest
+    its nadir that sees it, the stops in the polyline's order, so the tour is no longer than
+    the polyline. Where no sample sees a target (the polyline grazes its outer star, a hair
+    wider than what is seen) the sample nearest the nadir is moved towards it until it does.
+    None when a stop or leg fails the checks refinement applies (a frame camera, whose
+    stops need headings, is not read off a polyline). ``like`` gives the tour's solver
+    and bound."""
+    if like.headings_deg is not None:
+        return None
+    poly = np.asarray(polyline_xy, dtype=np.float64).reshape(-1, 2)
+    depot = None if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
+    if depot is not None:
+        # Start where the polyline passes nearest home (it passes through it).
+        at = int(np.argmin(np.hypot(*(poly - depot).T)))
+        poly = np.roll(poly, -at, axis=0)
+    samples = _along(
+        poly, _ALONG_SHARE * float(site.camera.least_half_width_m(site.ground_m).min())
+    )
+    m = len(site.targets_xy)
+    cone = site.camera.cone_radius_m(site.ground_m)
+    key = np.empty(m, dtype=np.int64)
+    stops = np.empty((m, 2))
+    for t in range(m):
+        dist = np.hypot(*(samples - site.targets_xy[t]).T)
+        near = np.argsort(dist)
+        near = near[: max(int(np.searchsorted(dist[near], cone[t])), 1)]
+        row = np.zeros((len(near), m), dtype=bool)
+        row[:, t] = True
+        seen = np.flatnonzero(_sees_all(site, samples[near], row, None))
+        if seen.size:
+            k = int(near[seen[0]])
+            stops[t] = samples[k]
+        else:
+            # The sample needing the least move towards the nadir to see the target.
+            moved = _towards_seen(site, samples[near], t)
+            j = int(np.argmin(np.hypot(*(moved - samples[near]).T)))
+            k, stops[t] = int(near[j]), moved[j]
+        # Targets seen from one sample share a stop; a stop moved off it is its own.
+        key[t] = k * (m + 1) + (0 if seen.size else t + 1)
+    keys, first, group = np.unique(key, return_index=True, return_inverse=True)
+    sees = np.zeros((len(keys), m), dtype=bool)
+    sees[group.ravel(), np.arange(m)] = True
+    pts = stops[first]
+    if not _sees_all(site, pts, sees, None).all():
+        return None
+    prev, nxt = _neighbours(pts, np.arange(len(pts)), depot)
+    if not _feasible(site, pts, sees, None, prev, nxt, depot).all():
+        return None
+    length = _closed_length(pts, depot)
+    return dataclasses.replace(
+        like,
+        order=(-1,) * len(pts),
+        length=length,
+        lower_bound=min(like.lower_bound, length),
+        proven_optimal=False,
+        points_xy=pts,
+        sees=sees,
+        notes=(*like.notes, f"stops read off the bound's relaxed tour: {length:.1f} m"),
+    )
+
+
+# Samples along a polyline a tour is read from: this share of the least cone radius apart.
+_ALONG_SHARE = 0.002
+# Halvings towards the nadir for a stop read off a polyline that does not see its target.
+_TOWARDS_STEPS = 40
+
+
+def _along(poly: FloatArray, spacing_m: float) -> FloatArray:
+    """Points along the closed polyline, in order, no more than ``spacing_m`` apart, every
+    vertex among them."""
+    ends = np.roll(poly, -1, axis=0)
+    pieces = []
+    for a, b in zip(poly, ends, strict=True):
+        count = max(1, math.ceil(math.hypot(*(b - a)) / max(spacing_m, 1e-9)))
+        f = np.arange(count)[:, None] / count
+        pieces.append(a + f * (b - a))
+    return np.vstack(pieces)
+
+
+def _towards_seen(site: Site, start: FloatArray, target: int) -> FloatArray:
+    """For each start, the point of its way to the target's nadir nearest it found to see
+    the target (halving: along an azimuth what is seen is an interval from the nadir)."""
+    c = site.targets_xy[target]
+    row = np.zeros((len(start), len(site.targets_xy)), dtype=bool)
+    row[:, target] = True
+    lo = np.zeros(len(start))  # share of the way travelled that fails
+    hi = np.ones(len(start))  # share that sees (the nadir is taken to)
+    for _ in range(_TOWARDS_STEPS):
+        mid = 0.5 * (lo + hi)
+        ok = _sees_all(site, start + mid[:, None] * (c - start), row, None)
+        hi = np.where(ok, mid, hi)
+        lo = np.where(ok, lo, mid)
+    out: FloatArray = start + hi[:, None] * (c - start)
+    return out
 
 
 def _pattern_search(
@@ -416,4 +527,4 @@ def written_grid(
     return written
 
 
-__all__ = ["Refinement", "Site", "refine_tour", "written_grid"]
+__all__ = ["Refinement", "Site", "refine_tour", "tour_along", "written_grid"]

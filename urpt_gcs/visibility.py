@@ -454,6 +454,26 @@ def _box_range(z, col0, row0, a, b, d, e, s0, s1, t0, t1, scale):  # type: ignor
     return lo, hi, math.sqrt(gc * gc + gr * gr) * scale
 
 
+# A band whose reach comes within this factor of the sector's reach so far is walked again
+# in this many slices (the reach a band gives is loose by about its slope times its width).
+_FINE_NEAR = 1.05
+_FINE_SLICES = 16
+
+
+@njit(cache=True, nogil=True)
+def _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, height):  # type: ignore[no-untyped-def]
+    """The least reach the slices of the band ``[s0, s0 + step]`` of a sector give, each
+    from its own lowest ground (inf when none hides anything)."""
+    reach = np.inf
+    width = step / _FINE_SLICES
+    for q in range(_FINE_SLICES):
+        s = s0 + q * width
+        lo = _box_range(z, col0, row0, a, b, d, e, s, s + width, t0, t1, scale)[0]
+        if not math.isnan(lo) and lo - 2e-6 > ground:
+            reach = min(reach, max(s, height * s / (lo - 2e-6 - ground)))
+    return reach
+
+
 @njit(cache=True, nogil=True)
 def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, outer, inner):  # type: ignore[no-untyped-def]
     """Per target ``k`` and sector ``j``: into ``outer[k, j]`` a reach no point of the sector
@@ -489,7 +509,16 @@ def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, o
                     sure = min(sure, s0)
                     break
                 if s0 < best and s0 > 0.0 and lo - 2e-6 > ground[k]:
-                    best = min(best, max(s0, height[k] * s0 / (lo - 2e-6 - ground[k])))
+                    reach = max(s0, height[k] * s0 / (lo - 2e-6 - ground[k]))
+                    if reach < best * _FINE_NEAR:
+                        # A band that may end the reach: its slices, each with its own
+                        # lowest ground, from its own start, are tighter.
+                        reach = min(
+                            reach,
+                            _fine_reach(z, col0[k], row0[k], a, b, d, e, s0, step, t0, t1,
+                                        scale, ground[k], height[k]),
+                        )  # fmt: skip
+                    best = min(best, reach)
                 if s0 < sure and math.isinf(hi):
                     sure = s0
                 elif s0 < sure:
