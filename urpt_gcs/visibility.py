@@ -468,6 +468,8 @@ def _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, heig
     width = step / _FINE_SLICES
     for q in range(_FINE_SLICES):
         s = s0 + q * width
+        if s <= 0.0:
+            continue
         lo = _box_range(z, col0, row0, a, b, d, e, s, s + width, t0, t1, scale)[0]
         if not math.isnan(lo) and lo - 2e-6 > ground:
             reach = min(reach, max(s, height * s / (lo - 2e-6 - ground)))
@@ -508,7 +510,15 @@ def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, o
                     best = min(best, s0)
                     sure = min(sure, s0)
                     break
-                if s0 < best and s0 > 0.0 and lo - 2e-6 > ground[k]:
+                if s0 == 0.0:
+                    # The first band gives nothing from its start, the target itself; its
+                    # slices give the slope the target stands on.
+                    best = min(
+                        best,
+                        _fine_reach(z, col0[k], row0[k], a, b, d, e, s0, step, t0, t1,
+                                    scale, ground[k], height[k]),
+                    )  # fmt: skip
+                elif s0 < best and lo - 2e-6 > ground[k]:
                     reach = max(s0, height[k] * s0 / (lo - 2e-6 - ground[k]))
                     if reach < best * _FINE_NEAR:
                         # A band that may end the reach: its slices, each with its own

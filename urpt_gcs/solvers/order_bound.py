@@ -592,11 +592,37 @@ def order_bound(
                 heapq.heappush(heap, (child.cert, counter, child))
     open_low = heap[0][0] if heap else math.inf
     value = min(closed, open_low, upper)
+    if leaf_node is None and heap:
+        leaf_node = _dive(heap[0][2], sets, m, step, scale)
+        leaf = math.inf if leaf_node is None else leaf_node.primal
     seconds = time.perf_counter() - started
     leaf_xy = None if leaf_node is None else np.column_stack([leaf_node.px, leaf_node.py])
     return OrderBound(
         max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf, leaf_xy
     )
+
+
+# Node solves a dive for a polyline meeting every set may take at most.
+_DIVE_SOLVES = 400
+
+
+def _dive(node: _Node, sets: _Sets, m: int, step: float, scale: float) -> _Node | None:
+    """From an open node, always into the child with the shortest polyline, until one meets
+    every set (None when the dive's budget runs out first): a polyline for a tour to be read
+    off when the search stopped before meeting one. It bounds nothing."""
+    solves = 0
+    while solves < _DIVE_SOLVES:
+        ways = _branch(node, sets, m, 1)
+        if ways is None:
+            return node
+        children = ways[0]
+        if not children:
+            return None
+        for child in children:
+            _solve(child, sets, step, math.inf, scale)
+        solves += len(children)
+        node = min(children, key=lambda c: c.primal)
+    return None
 
 
 def _solve(node: _Node, sets: _Sets, step: float, prune_at: float, scale: float) -> None:
