@@ -145,6 +145,27 @@ def test_order_bound_is_below_and_close_to_a_brute_force_tour(seed: int) -> None
     assert bound.value >= 0.99 * brute
 
 
+def test_a_search_stopped_early_still_meets_every_region() -> None:
+    """Stopped after a few nodes, before any polyline met every disc, the search dives for
+    one: the polyline it returns passes within every disc (measured by shapely)."""
+    from urpt_gcs.solvers.order_bound import order_bound
+    from urpt_gcs.solvers.regions import OuterStar
+
+    rng = np.random.default_rng(7)
+    n = 30
+    discs = np.column_stack([rng.uniform(0, 100, n), rng.uniform(0, 100, n), rng.uniform(1, 4, n)])
+    stars: list[OuterStar | None] = [OuterStar((x, y), np.full(1, r)) for x, y, r in discs]
+    found = order_bound(stars, None, 1e9, 60.0, max_nodes=3)
+    assert not found.finished
+    assert found.leaf_xy is not None
+    ring = shapely.LinearRing(found.leaf_xy)
+    assert len(found.leaf_xy) < n  # the polyline is more than a list of the discs' points
+    for x, y, r in discs:
+        assert ring.distance(shapely.Point(x, y)) <= r * (1.0 + 1e-6)
+    assert found.leaf_length == pytest.approx(ring.length, rel=1e-6)
+    assert found.value <= found.leaf_length
+
+
 def _crescent(cx: float, cy: float, r: float, turn: float) -> Polygon:
     """A star-shaped, far from convex region: a disc with a deep notch cut from one side."""
     a = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)

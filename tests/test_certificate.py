@@ -198,7 +198,8 @@ def test_optimal_over_candidates_is_not_called_proven_optimal(
     small_site: tuple[Path, Path], tmp_path: Path
 ) -> None:
     dem, csv = small_site
-    result = plan(dem, csv, _settings())
+    # Unrefined, the exact tour over the candidates is well above the shortest flight.
+    result = plan(dem, csv, _settings(refine=False))
     data = write_products(result, tmp_path / "out", with_map=False)
     assert data["optimal_over_candidates"] is True  # exact, over a few hundred candidates
     assert data["gap_pct"] > data["proven_gap_pct"]
@@ -222,14 +223,7 @@ def test_refined_stops_see_their_targets_on_paper_terrains(
     """Refinement of the exact tour on the paper's TIN terrains: never longer, and every
     refined stop sees the targets it is counted for by a brute-force line of sight on the
     raw raster (dense samples, scipy's interpolation)."""
-    from urpt_gcs.bench.paper import (
-        ALTITUDE,
-        CELL,
-        SIZE,
-        paper_instance,
-        random_targets,
-        tin_terrain,
-    )
+    from urpt_gcs.bench.paper import ALTITUDE, paper_instance, random_targets, tin_terrain
     from urpt_gcs.refinement import Site, refine_tour
     from urpt_gcs.solvers import solve
     from urpt_gcs.visibility import Camera
@@ -249,9 +243,25 @@ def test_refined_stops_see_their_targets_on_paper_terrains(
     assert float(np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T).sum()) == pytest.approx(
         refined.length
     )
-    assert refined.sees.any(axis=0).all()
+    _assert_stops_see(z, targets, ground, fov, pts, refined.sees)
+
+
+def _assert_stops_see(
+    z: np.ndarray,
+    targets: np.ndarray,
+    ground: np.ndarray,
+    fov: float,
+    pts: np.ndarray,
+    sees: np.ndarray,
+) -> None:
+    """Every target is counted at a stop, and every stop sees what it is counted for, by a
+    brute-force line of sight on the raw raster of a paper terrain (dense samples, scipy's
+    interpolation) and the cone."""
+    from urpt_gcs.bench.paper import ALTITUDE, CELL, SIZE
+
+    assert sees.any(axis=0).all()
     t = np.linspace(0.0, 1.0, 2000)[1:]
-    for k, row in enumerate(refined.sees):
+    for k, row in enumerate(sees):
         for j in np.flatnonzero(row):
             (tx, ty), (ex, ey) = targets[j], pts[k]
             d = math.hypot(ex - tx, ey - ty)
@@ -260,3 +270,38 @@ def test_refined_stops_see_their_targets_on_paper_terrains(
             col, row_ = x / CELL - 0.5, (SIZE - y) / CELL - 0.5
             h = map_coordinates(z, [row_, col], order=1, mode="nearest", prefilter=False)
             assert np.all(h <= ground[j] + t * (ALTITUDE - ground[j]) + 1e-6)
+
+
+@pytest.mark.parametrize(("terrain_seed", "m", "fov"), [(0, 8, 40.0), (10, 6, 40.0)])
+def test_a_tour_read_off_the_bounds_relaxed_tour(terrain_seed: int, m: int, fov: float) -> None:
+    """The bound's shortest relaxed tour, read as a tour on a paper terrain: every stop sees
+    its targets by brute force, the tour is not much longer than the polyline (it leaves it
+    only where the polyline grazes an outer star), and never shorter than the bound."""
+    from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
+    from urpt_gcs.certificate import certify
+    from urpt_gcs.refinement import Site, refine_tour, tour_along
+    from urpt_gcs.solvers import Tour
+    from urpt_gcs.visibility import Camera
+
+    terrain = tin_terrain(terrain_seed)
+    targets = random_targets(terrain_seed, m)
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    camera = Camera(ALTITUDE, fov)
+    regions, _ = outer_regions(terrain, targets, ground, camera, None)
+    cert = certify(regions, 1e9, 2.0)
+    assert cert.relaxed_tour_xy is not None
+    poly = cert.relaxed_tour_xy
+    poly_m = float(np.hypot(*np.diff(np.vstack([poly, poly[:1]]), axis=0).T).sum())
+    like = Tour((), 0.0, 0.0, False, "test", 0.0, None, np.zeros((0, m), dtype=bool))
+    site = Site(terrain, targets, ground, camera)
+    along = tour_along(site, poly, None, like)
+    assert along is not None and along.points_xy is not None
+    pts = along.points_xy
+    length = float(np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T).sum())
+    assert length == pytest.approx(along.length)
+    assert cert.lower_bound_m <= length <= 1.1 * poly_m
+    _assert_stops_see(terrain.elevation_m, targets, ground, fov, pts, along.sees)
+    refined, _ = refine_tour(site, along, None, 30.0)
+    assert cert.lower_bound_m <= refined.length <= length + 1e-9
+    assert refined.points_xy is not None
+    _assert_stops_see(terrain.elevation_m, targets, ground, fov, refined.points_xy, refined.sees)

@@ -31,7 +31,7 @@ from urpt_gcs.mission import (
     build_mission,
     waypoint_positions,
 )
-from urpt_gcs.refinement import Refinement, Site, refine_tour, written_grid
+from urpt_gcs.refinement import Refinement, Site, refine_tour, tour_along, written_grid
 from urpt_gcs.safety import (
     FlightModel,
     Leg,
@@ -544,23 +544,8 @@ def finish_plan(
         stages.say("moving the stops within what they see")
         tour, refinement = _refine(site, area, tour, settings)
         stages.lap("refine")
-    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
-    budget = SEARCH_SHARE * settings.solve.time_limit_s
-    stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
-    tour, sortie_order = order_sorties(
-        tour,
-        site.home_xy,
-        _altitude_rel(area),
-        flight_model(settings),
-        endurance,
-        [f"stop {k}" for k in range(1, len(tour.sees) + 1)],
-        budget,
-        settings.solve.seed,
-    )
-    stages.lap("sorties")
-    stages.say("checking the missions")
-    flight = _fly(site, area, tour, settings)
-    stages.lap("checks")
+    planned = tour
+    tour, sortie_order, flight = _sorties_and_checks(site, area, planned, settings, stages)
     certificate = None
     if settings.certify:
         bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
@@ -570,6 +555,19 @@ def finish_plan(
             site, area, instance, flown_m, bound_s, settings.workers, settings.position_tolerance_m
         )
         stages.lap("bound")
+        found = _from_bound(site, area, planned, certificate, settings)
+        if found is not None and refinement is not None:
+            stages.say("checking the tour read off the bound")
+            other = _sorties_and_checks(site, area, found, settings, _Stages(None))
+            other_m = math.fsum(s.length_m for s in other[2].sorties)
+            stages.lap("bound's tour")
+            if other_m < flown_m:
+                # Shorter as flown too: it is the plan.
+                tour, sortie_order, flight = other
+                refinement = dataclasses.replace(refinement, after_m=found.length)
+                certificate = dataclasses.replace(
+                    certificate, lower_bound_m=min(certificate.lower_bound_m, other_m)
+                )
     return Plan(
         settings=settings,
         dem=site.dem,
@@ -600,6 +598,48 @@ def finish_plan(
     )
 
 
+def _sorties_and_checks(
+    site: _Site, area: _Area, tour: Tour, settings: PlanSettings, stages: _Stages
+) -> tuple[Tour, SortieOrder | None, _Flight]:
+    """The tour ordered and cut into sorties, and its missions written and checked."""
+    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
+    budget = SEARCH_SHARE * settings.solve.time_limit_s
+    stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
+    tour, sortie_order = order_sorties(
+        tour,
+        site.home_xy,
+        _altitude_rel(area),
+        flight_model(settings),
+        endurance,
+        [f"stop {k}" for k in range(1, len(tour.sees) + 1)],
+        budget,
+        settings.solve.seed,
+    )
+    stages.lap("sorties")
+    stages.say("checking the missions")
+    flight = _fly(site, area, tour, settings)
+    stages.lap("checks")
+    return tour, sortie_order, flight
+
+
+def _from_bound(
+    site: _Site, area: _Area, tour: Tour, certificate: Certificate, settings: PlanSettings
+) -> Tour | None:
+    """The tour read off the certified bound's relaxed tour and refined, checked as the
+    mission will be, when it is shorter than ``tour`` (the refined tour); else None."""
+    if not settings.refine or certificate.relaxed_tour_xy is None:
+        return None
+    check = _check_site(site, area, settings)
+    along = tour_along(check, certificate.relaxed_tour_xy, site.home_xy, tour)
+    if along is None:
+        return None
+    found, _ = refine_tour(check, along, site.home_xy, _REFINE_MAX_S)
+    return found if found.length < tour.length * (1.0 - _BETTER) else None
+
+
+# How much shorter a tour read off the bound must be to replace the refined one.
+_BETTER = 1e-6
+
 # Seconds refinement may take at most: it ends when its steps are down to a centimetre (so
 # that a plan does not depend on the machine's load), this only guards against a runaway.
 _REFINE_MAX_S = 60.0
@@ -610,6 +650,12 @@ def _refine(
 ) -> tuple[Tour, Refinement]:
     """Move the stops within what they see, checked as the mission will be (the position
     margin, the written grid and the legs' clearance)."""
+    return refine_tour(_check_site(site, area, settings), tour, site.home_xy, _REFINE_MAX_S)
+
+
+def _check_site(site: _Site, area: _Area, settings: PlanSettings) -> Site:
+    """What a stop is checked against: the position margin, the written grid and the legs'
+    clearance, on the terrain read so far (filled along new legs)."""
     to_geo = pyproj.Transformer.from_crs(site.crs, WGS84, always_xy=True)
     to_grid = pyproj.Transformer.from_crs(WGS84, site.crs, always_xy=True)
 
@@ -624,7 +670,7 @@ def _refine(
     def fill(a: FloatArray, b: FloatArray) -> None:
         fill_along(site.dem, area.terrain, a, b)
 
-    check = Site(
+    return Site(
         terrain=area.terrain,
         targets_xy=site.targets_xy,
         ground_m=area.ground_m,
@@ -635,7 +681,6 @@ def _refine(
         fill=fill,
         workers=settings.workers,
     )
-    return refine_tour(check, tour, site.home_xy, _REFINE_MAX_S)
 
 
 def _certify(

@@ -283,9 +283,9 @@ def tour_along(
         # Start where the polyline passes nearest home (it passes through it).
         at = int(np.argmin(np.hypot(*(poly - depot).T)))
         poly = np.roll(poly, -at, axis=0)
-    samples = _along(
-        poly, _ALONG_SHARE * float(site.camera.least_half_width_m(site.ground_m).min())
-    )
+    least = float(site.camera.least_half_width_m(site.ground_m).min())
+    around = float(np.hypot(*np.diff(np.vstack([poly, poly[:1]]), axis=0).T).sum())
+    samples = _along(poly, max(_ALONG_SHARE * least, around / _ALONG_MOST))
     m = len(site.targets_xy)
     cone = site.camera.cone_radius_m(site.ground_m)
     key = np.empty(m, dtype=np.int64)
@@ -293,7 +293,7 @@ def tour_along(
     for t in range(m):
         dist = np.hypot(*(samples - site.targets_xy[t]).T)
         near = np.argsort(dist)
-        near = near[: max(int(np.searchsorted(dist[near], cone[t])), 1)]
+        near = near[: min(max(int(np.searchsorted(dist[near], cone[t])), 1), _NEAREST)]
         row = np.zeros((len(near), m), dtype=bool)
         row[:, t] = True
         seen = np.flatnonzero(_sees_all(site, samples[near], row, None))
@@ -331,6 +331,9 @@ def tour_along(
 
 # Samples along a polyline a tour is read from: this share of the least cone radius apart.
 _ALONG_SHARE = 0.002
+# Samples along the polyline at most, and per target the nearest of them tried at most.
+_ALONG_MOST = 50_000
+_NEAREST = 1024
 # Halvings towards the nadir for a stop read off a polyline that does not see its target.
 _TOWARDS_STEPS = 40
 
