@@ -602,7 +602,8 @@ def order_bound(
     )
 
 
-# Node solves a dive for a polyline meeting every set may take at most.
+# Node solves a dive for a polyline meeting every set may take at most (a dive inserts
+# one region a step, a child per position: it is for a few tens of regions).
 _DIVE_SOLVES = 400
 
 
@@ -616,7 +617,7 @@ def _dive(node: _Node, sets: _Sets, m: int, step: float, scale: float) -> _Node 
         if ways is None:
             return node
         children = ways[0]
-        if not children:
+        if not children or solves + len(children) > _DIVE_SOLVES:
             return None
         for child in children:
             _solve(child, sets, step, math.inf, scale)
