@@ -405,6 +405,7 @@ def test_without_a_terminal_each_stage_prints_one_line_with_its_time(
         "ordering the stops for sorties (up to 0.1 s)",
         "checking the missions",
         "bounding the shortest possible flight (up to 0.2 s)",
+        "reading a tour off the bound",
         "writing outputs",
     ]
     for quiet in ("--quiet", "--json"):

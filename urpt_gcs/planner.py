@@ -555,16 +555,14 @@ def finish_plan(
             site, area, instance, flown_m, bound_s, settings.workers, settings.position_tolerance_m
         )
         stages.lap("bound")
-        found = _from_bound(site, area, planned, certificate, settings)
-        if found is not None and refinement is not None:
-            stages.say("checking the tour read off the bound")
-            other = _sorties_and_checks(site, area, found, settings, _Stages(None))
-            other_m = math.fsum(s.length_m for s in other[2].sorties)
+        if settings.refine and refinement is not None:
+            stages.say("reading a tour off the bound")
+            better = _bounds_tour(site, area, planned, certificate, settings, flown_m)
             stages.lap("bound's tour")
-            if other_m < flown_m:
+            if better is not None:
                 # Shorter as flown too: it is the plan.
-                tour, sortie_order, flight = other
-                refinement = dataclasses.replace(refinement, after_m=found.length)
+                (tour, sortie_order, flight), other_m, refined_m = better
+                refinement = dataclasses.replace(refinement, after_m=refined_m)
                 certificate = dataclasses.replace(
                     certificate, lower_bound_m=min(certificate.lower_bound_m, other_m)
                 )
@@ -622,19 +620,29 @@ def _sorties_and_checks(
     return tour, sortie_order, flight
 
 
-def _from_bound(
-    site: _Site, area: _Area, tour: Tour, certificate: Certificate, settings: PlanSettings
-) -> Tour | None:
+def _bounds_tour(
+    site: _Site,
+    area: _Area,
+    tour: Tour,
+    certificate: Certificate,
+    settings: PlanSettings,
+    flown_m: float,
+) -> tuple[tuple[Tour, SortieOrder | None, _Flight], float, float] | None:
     """The tour read off the certified bound's relaxed tour and refined, checked as the
-    mission will be, when it is shorter than ``tour`` (the refined tour); else None."""
-    if not settings.refine or certificate.relaxed_tour_xy is None:
+    mission will be, cut into sorties and checked, with its flown and refined lengths: when it is
+    shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown; else None."""
+    if certificate.relaxed_tour_xy is None:
         return None
     check = _check_site(site, area, settings)
     along = tour_along(check, certificate.relaxed_tour_xy, site.home_xy, tour)
     if along is None:
         return None
     found, _ = refine_tour(check, along, site.home_xy, _REFINE_MAX_S)
-    return found if found.length < tour.length * (1.0 - _BETTER) else None
+    if found.length >= tour.length * (1.0 - _BETTER):
+        return None
+    flown = _sorties_and_checks(site, area, found, settings, _Stages(None))
+    other_m = math.fsum(s.length_m for s in flown[2].sorties)
+    return (flown, other_m, found.length) if other_m < flown_m else None
 
 
 # How much shorter a tour read off the bound must be to replace the refined one.
