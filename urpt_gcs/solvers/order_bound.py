@@ -593,7 +593,9 @@ def order_bound(
     open_low = heap[0][0] if heap else math.inf
     value = min(closed, open_low, upper)
     if leaf_node is None and heap:
-        leaf_node = _dive(heap[0][2], sets, m, step, scale)
+        # The dive may overrun the time limit by a quarter of it at most.
+        deadline = max(started + time_limit_s, time.perf_counter()) + _DIVE_SHARE * time_limit_s
+        leaf_node = _dive(heap[0][2], sets, m, step, scale, deadline)
         leaf = math.inf if leaf_node is None else leaf_node.primal
     seconds = time.perf_counter() - started
     leaf_xy = None if leaf_node is None else np.column_stack([leaf_node.px, leaf_node.py])
@@ -605,14 +607,17 @@ def order_bound(
 # Node solves a dive for a polyline meeting every set may take at most (a dive inserts
 # one region a step, a child per position: it is for a few tens of regions).
 _DIVE_SOLVES = 400
+_DIVE_SHARE = 0.25
 
 
-def _dive(node: _Node, sets: _Sets, m: int, step: float, scale: float) -> _Node | None:
+def _dive(
+    node: _Node, sets: _Sets, m: int, step: float, scale: float, deadline: float
+) -> _Node | None:
     """From an open node, always into the child with the shortest polyline, until one meets
-    every set (None when the dive's budget runs out first): a polyline for a tour to be read
-    off when the search stopped before meeting one. It bounds nothing."""
+    every set (None when the dive's budget or ``deadline`` runs out first): a polyline for a
+    tour to be read off when the search stopped before meeting one. It bounds nothing."""
     solves = 0
-    while solves < _DIVE_SOLVES:
+    while solves < _DIVE_SOLVES and time.perf_counter() < deadline:
         ways = _branch(node, sets, m, 1)
         if ways is None:
             return node
@@ -620,6 +625,8 @@ def _dive(node: _Node, sets: _Sets, m: int, step: float, scale: float) -> _Node 
         if not children or solves + len(children) > _DIVE_SOLVES:
             return None
         for child in children:
+            if time.perf_counter() >= deadline:
+                return None
             _solve(child, sets, step, math.inf, scale)
         solves += len(children)
         node = min(children, key=lambda c: c.primal)
