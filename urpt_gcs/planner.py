@@ -31,7 +31,7 @@ from urpt_gcs.mission import (
     build_mission,
     waypoint_positions,
 )
-from urpt_gcs.refinement import Refinement, Site, refine_tour, tour_along, written_grid
+from urpt_gcs.refinement import Refinement, Site, refine_along, refine_tour, written_grid
 from urpt_gcs.safety import (
     FlightModel,
     Leg,
@@ -555,7 +555,7 @@ def finish_plan(
             site, area, instance, flown_m, bound_s, settings.workers, settings.position_tolerance_m
         )
         stages.lap("bound")
-        if settings.refine and refinement is not None:
+        if refinement is not None:
             stages.say("reading a tour off the bound")
             better = _bounds_tour(site, area, planned, certificate, settings, flown_m)
             stages.lap("bound's tour")
@@ -629,15 +629,15 @@ def _bounds_tour(
     flown_m: float,
 ) -> tuple[tuple[Tour, SortieOrder | None, _Flight], float, float] | None:
     """The tour read off the certified bound's relaxed tour and refined, checked as the
-    mission will be, cut into sorties and checked, with its flown and refined lengths: when it is
-    shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown; else None."""
+    mission will be, cut into sorties and checked, with its flown and refined lengths: when
+    it is shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown; else None."""
     if certificate.relaxed_tour_xy is None:
         return None
     check = _check_site(site, area, settings)
-    along = tour_along(check, certificate.relaxed_tour_xy, site.home_xy, tour)
-    if along is None:
+    read = refine_along(check, certificate.relaxed_tour_xy, site.home_xy, tour, _REFINE_MAX_S)
+    if read is None:
         return None
-    found, _ = refine_tour(check, along, site.home_xy, _REFINE_MAX_S)
+    found = read[0]
     if found.length >= tour.length * (1.0 - _BETTER):
         return None
     flown = _sorties_and_checks(site, area, found, settings, _Stages(None))

@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from urpt_gcs.margin import RING_POINTS
 from urpt_gcs.segments import segment_profile
@@ -288,12 +289,13 @@ def tour_along(
     samples = _along(poly, max(_ALONG_SHARE * least, around / _ALONG_MOST))
     m = len(site.targets_xy)
     cone = site.camera.cone_radius_m(site.ground_m)
+    # Per target its nearest samples, nearest first; those in its cone (the nearest at least).
+    dist, nearest = cKDTree(samples).query(site.targets_xy, k=min(_NEAREST, len(samples)))
+    dist, nearest = dist.reshape(m, -1), nearest.reshape(m, -1)
     key = np.empty(m, dtype=np.int64)
     stops = np.empty((m, 2))
     for t in range(m):
-        dist = np.hypot(*(samples - site.targets_xy[t]).T)
-        near = np.argsort(dist)
-        near = near[: min(max(int(np.searchsorted(dist[near], cone[t])), 1), _NEAREST)]
+        near = nearest[t, : max(int(np.searchsorted(dist[t], cone[t])), 1)]
         row = np.zeros((len(near), m), dtype=bool)
         row[:, t] = True
         seen = np.flatnonzero(_sees_all(site, samples[near], row, None))
@@ -311,8 +313,6 @@ def tour_along(
     sees = np.zeros((len(keys), m), dtype=bool)
     sees[group.ravel(), np.arange(m)] = True
     pts = stops[first]
-    if not _sees_all(site, pts, sees, None).all():
-        return None
     prev, nxt = _neighbours(pts, np.arange(len(pts)), depot)
     if not _feasible(site, pts, sees, None, prev, nxt, depot).all():
         return None
@@ -327,6 +327,19 @@ def tour_along(
         sees=sees,
         notes=(*like.notes, f"stops read off the bound's relaxed tour: {length:.1f} m"),
     )
+
+
+def refine_along(
+    site: Site,
+    polyline_xy: FloatArray,
+    depot_xy: tuple[float, float] | None,
+    like: Tour,
+    time_limit_s: float,
+) -> tuple[Tour, Refinement] | None:
+    """The tour read off the polyline (:func:`tour_along`), refined (:func:`refine_tour`);
+    None when none could be read."""
+    along = tour_along(site, polyline_xy, depot_xy, like)
+    return None if along is None else refine_tour(site, along, depot_xy, time_limit_s)
 
 
 # Samples along a polyline a tour is read from: this share of the least cone radius apart.
@@ -530,4 +543,4 @@ def written_grid(
     return written
 
 
-__all__ = ["Refinement", "Site", "refine_tour", "tour_along", "written_grid"]
+__all__ = ["Refinement", "Site", "refine_along", "refine_tour", "tour_along", "written_grid"]

@@ -461,6 +461,17 @@ _FINE_SLICES = 16
 
 
 @njit(cache=True, nogil=True)
+def _band_reach(s, lo, ground, height):  # type: ignore[no-untyped-def]
+    """How far a sector is seen at most past ground at least ``lo`` from ``s`` on (inf when
+    that ground is no higher than the target's): the sight line to a plane point at ``S``
+    passes ``s`` at ``ground + s height / S``, below ``lo`` once ``S > s height / (lo -
+    ground)``, and only passes ``s`` at all when ``S > s``."""
+    if not lo - 2e-6 > ground:
+        return np.inf
+    return max(s, height * s / (lo - 2e-6 - ground))
+
+
+@njit(cache=True, nogil=True)
 def _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, height):  # type: ignore[no-untyped-def]
     """The least reach the slices of the band ``[s0, s0 + step]`` of a sector give, each
     from its own lowest ground (inf when none hides anything)."""
@@ -471,8 +482,8 @@ def _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, heig
         if s <= 0.0:
             continue
         lo = _box_range(z, col0, row0, a, b, d, e, s, s + width, t0, t1, scale)[0]
-        if not math.isnan(lo) and lo - 2e-6 > ground:
-            reach = min(reach, max(s, height * s / (lo - 2e-6 - ground)))
+        if not math.isnan(lo):
+            reach = min(reach, _band_reach(s, lo, ground, height))
     return reach
 
 
@@ -518,8 +529,8 @@ def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, o
                         _fine_reach(z, col0[k], row0[k], a, b, d, e, s0, step, t0, t1,
                                     scale, ground[k], height[k]),
                     )  # fmt: skip
-                elif s0 < best and lo - 2e-6 > ground[k]:
-                    reach = max(s0, height[k] * s0 / (lo - 2e-6 - ground[k]))
+                elif s0 < best:
+                    reach = _band_reach(s0, lo, ground[k], height[k])
                     if reach < best * _FINE_NEAR:
                         # A band that may end the reach: its slices, each with its own
                         # lowest ground, from its own start, are tighter.

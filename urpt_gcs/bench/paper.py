@@ -36,7 +36,7 @@ from urpt_gcs.certificate import Certificate, certify, outer_regions
 from urpt_gcs.cluster import map_jobs
 from urpt_gcs.gtsp import Covers, Instance, build_instance
 from urpt_gcs.outputs.output import write_all
-from urpt_gcs.refinement import Site, refine_tour, tour_along
+from urpt_gcs.refinement import Site, refine_along, refine_tour
 from urpt_gcs.solvers import SOLVERS, SolveSettings, Tour, solve
 from urpt_gcs.solvers.approx import paper_path
 from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
@@ -229,14 +229,13 @@ def run_instance(
 def _from_bound(site: Site, cert: Certificate, refined: Tour, seconds: float) -> tuple[Tour, float]:
     """The shorter of the refined tour and the tour read off the bound's relaxed tour and
     refined in turn, and the seconds refinement took in all."""
-    if cert.relaxed_tour_xy is None:
+    found = None
+    if cert.relaxed_tour_xy is not None:
+        found = refine_along(site, cert.relaxed_tour_xy, None, refined, REFINE_S)
+    if found is None:
         return refined, seconds
-    along = tour_along(site, cert.relaxed_tour_xy, None, refined)
-    if along is None:
-        return refined, seconds
-    again, done = refine_tour(site, along, None, REFINE_S)
-    best = again if again.length < refined.length else refined
-    return best, seconds + done.seconds
+    again, done = found
+    return (again if again.length < refined.length else refined), seconds + done.seconds
 
 
 def study_grid(quick: bool) -> list[Key]:

@@ -489,7 +489,8 @@ class OrderBound:
     finished: bool
     seconds: float
     # The shortest closed polyline met that meets every set searched (the stars, or the
-    # shapes where given): a real tour when those are the regions themselves.
+    # shapes where given; when the search met none, one a dive found): a real tour when
+    # those are the regions themselves.
     leaf_length: float = math.inf
     # That polyline's points, in order.
     leaf_xy: FloatArray | None = None
