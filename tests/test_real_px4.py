@@ -318,14 +318,15 @@ class UdpLossyRelay:
 
 def test_upload_through_a_relay_dropping_20_percent_each_way(demo_plan: Path) -> None:
     mission = read_mission(demo_plan)
-    with px4_sitl.launch(PX4, mission.home, SPEEDUP) as sitl:
+    # Real time, as a radio link runs: sped up tenfold, PX4 streams about 3000 telemetry frames
+    # a second through the Python relay, and the mission items drowned in them far beyond the
+    # 20 % dropped on purpose (read-backs then failed on nearly every attempt).
+    with px4_sitl.launch(PX4, mission.home, 1.0) as sitl:
         relay = UdpLossyRelay(int(sitl.url.rsplit(":", 1)[1]), 0.2, seed=9)
         try:
             started = time.monotonic()
-            # Over UDP at this loss a whole upload is lost more often than over TCP: allow more
-            # whole-upload attempts, each still verified by the read-back.
             report = upload(
-                mission, f"udpin://127.0.0.1:{relay.gcs_port}", retries=8, timeout_s=20.0
+                mission, f"udpin://127.0.0.1:{relay.gcs_port}", retries=3, timeout_s=20.0
             )
             elapsed = time.monotonic() - started
         finally:
