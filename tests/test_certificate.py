@@ -305,3 +305,36 @@ def test_a_tour_read_off_the_bounds_relaxed_tour(terrain_seed: int, m: int, fov:
     assert cert.lower_bound_m <= refined.length <= length + 1e-9
     assert refined.points_xy is not None
     _assert_stops_see(terrain.elevation_m, targets, ground, fov, refined.points_xy, refined.sees)
+
+
+def test_stars_tightened_where_the_relaxed_tour_meets_them() -> None:
+    """Paper terrain 2, 6 targets at 40 deg: the relaxed tour meets a star on a spike that
+    reaches the cone's edge where nothing is seen. Walking the sectors it meets again, finer,
+    raises the bound, which stays below a real tour (read off the polyline, every stop seen
+    by brute force)."""
+    from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
+    from urpt_gcs.certificate import certify, finer_stars
+    from urpt_gcs.refinement import Site, refine_along
+    from urpt_gcs.solvers import Tour
+    from urpt_gcs.visibility import Camera
+
+    terrain = tin_terrain(2)
+    targets = random_targets(2, 6)
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    camera = Camera(ALTITUDE, 40.0)
+    regions, ratio = outer_regions(terrain, targets, ground, camera, None)
+    plain = certify(regions, 1e9, 1.0)
+    tight = certify(regions, 1e9, 5.0, 0.0, ratio, finer_stars(terrain, camera))
+    assert tight.lower_bound_m >= 1.003 * plain.lower_bound_m
+    assert tight.area_ratio < ratio
+    like = Tour((), 0.0, 0.0, False, "test", 0.0, None, np.zeros((0, 6), dtype=bool))
+    site = Site(terrain, targets, ground, camera)
+    assert tight.relaxed_tour_xy is not None
+    read = refine_along(site, tight.relaxed_tour_xy, None, like, 30.0)
+    assert read is not None
+    tour = read[0]
+    assert tour.points_xy is not None
+    _assert_stops_see(terrain.elevation_m, targets, ground, 40.0, tour.points_xy, tour.sees)
+    pts = tour.points_xy
+    length = float(np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T).sum())
+    assert tight.lower_bound_m <= length

@@ -10,17 +10,22 @@ candidate viewpoints.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
+from urpt_gcs.refinement import points_along
 from urpt_gcs.solvers.bound import lower_bound
 from urpt_gcs.solvers.regions import OuterStar, RegionSet
 from urpt_gcs.terrain import FloatArray, Terrain
-from urpt_gcs.visibility import STAR_SECTORS, Camera, star_reach
+from urpt_gcs.visibility import FINER_SPLIT, STAR_SECTORS, Camera, finer_wedges, star_reach
 
 # Below this gap a tour is called optimal: its length is within it of the certified bound.
 PROVEN_GAP = 1e-4
@@ -33,6 +38,23 @@ BOUND_MAX_REGIONS = 150
 # Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
 _FINE_UP_TO = 24
 _LEAST_SECTORS = 180
+# Tightening the stars where the relaxed tour meets them: the sectors it passes within this
+# share of their reach from the edge are walked again finer, closest to the edge first, as
+# many as fit half the time left (at about this many seconds each).
+_NEAR_EDGE = 0.2
+# A relaxed tour meets a star to within this share of its reach (the bound's tolerance).
+_TOUCH = 1e-3
+# ... and this share of a sector's width from its edge counts in the neighbour too.
+_TOUCH_EDGE = 0.05
+_FINER_S = 0.015
+# Sectors on either side of one met near its edge walked again with it.
+_AROUND = 2
+# The first bound's share of the time when the stars are tightened after it.
+_FIRST_SHARE = 0.5
+
+# Tighter regions where a relaxed tour meets them, within a time budget (None: nothing left
+# to tighten).
+Tighten = Callable[[RegionSet, FloatArray, float], "RegionSet | None"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,20 +171,162 @@ def certify(
     time_limit_s: float,
     also_m: float = 0.0,
     area_ratio: float = math.nan,
+    tighten: Tighten | None = None,
 ) -> Certificate:
     """The certified lower bound for a flight of ``length_m`` over ``regions``.
 
     ``also_m`` is another valid bound of the same problem (the depot's and the disc-packing
-    bounds); the larger of the two is kept, never more than the flight itself.
+    bounds); the larger of the two is kept, never more than the flight itself. With
+    ``tighten`` (:func:`finer_stars`), while time is left the regions are tightened where
+    the relaxed tour meets them and bounded again.
     """
-    bound = lower_bound(regions, length_m, time_limit_s)
-    value, method = bound.value, bound.method
+    started = time.perf_counter()
+    # Tightening needs time after the first bound: that one gets a share.
+    first_s = time_limit_s if tighten is None else _FIRST_SHARE * time_limit_s
+    bound = lower_bound(regions, length_m, first_s)
+    value, method, poly = bound.value, bound.method, bound.relaxed_tour_xy
+    first = sum(float(np.mean(s.reach_m**2)) for s in regions.outer)
+    sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
+    # Where the relaxed tour meets a star near its edge the star may be loose there (a
+    # sector's reach is its widest): walk those sectors again, finer, and bound again.
+    while tighten is not None and poly is not None and (length_m - value) > PROVEN_GAP * value:
+        left = time_limit_s - (time.perf_counter() - started)
+        if left <= 0.0:
+            break
+        finer = tighten(regions, poly, 0.5 * left)
+        if finer is None:
+            break
+        regions = finer
+        spent = time.perf_counter() - started
+        again = lower_bound(regions, length_m, max(time_limit_s - spent, 0.0))
+        if again.value <= value:
+            # Stopped by the time before it passed the last bound: keep that one's tour.
+            break
+        value, method = again.value, again.method
+        poly = again.relaxed_tour_xy if again.relaxed_tour_xy is not None else poly
+    if first > 0.0:
+        area_ratio *= sum(float(np.mean(s.reach_m**2)) for s in regions.outer) / first
     if also_m > value:
         value, method = also_m, "geometric"
-    sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
     return Certificate(
-        min(value, length_m), method, bound.seconds, sectors, area_ratio, bound.relaxed_tour_xy
+        min(value, length_m), method, time.perf_counter() - started, sectors, area_ratio, poly
     )
+
+
+def finer_stars(
+    terrain: Terrain, camera: Camera, workers: int | None = 1, hold_m: float = 0.0
+) -> Tighten:
+    """What tightens the outer stars of :func:`outer_regions` (made with the same terrain,
+    camera and ``hold_m``) where a relaxed tour meets them: each sector it passes near the
+    star's edge (within :data:`_NEAR_EDGE` of its reach, and farther out than the star is
+    surely seen) is walked again by :func:`urpt_gcs.visibility.finer_reach`, once. The stars
+    still hold every point that sees their targets."""
+    done: dict[tuple[float, float], np.ndarray] = {}
+
+    def tighten(regions: RegionSet, poly_xy: FloatArray, budget_s: float) -> RegionSet | None:
+        stars = regions.outer
+        if not stars:
+            return None
+        poly = np.asarray(poly_xy, dtype=np.float64).reshape(-1, 2)
+        spacing = terrain.cell_m / 2.0
+        samples = points_along(poly, spacing)
+        tree = cKDTree(samples)
+        asked: list[tuple[float, int, int]] = []
+        for i, star in enumerate(stars):
+            n = star.reach_m.size
+            seen = done.setdefault(star.center_xy, np.zeros(n, dtype=bool))
+            c = np.asarray(star.center_xy)
+            far = float(star.reach_m.max()) / math.cos(math.pi / n) * (1.0 + _TOUCH)
+            near = tree.query_ball_point(c, far)
+            if not near:
+                continue
+            rel = samples[near] - c
+            dist = np.hypot(*rel.T)
+            f = np.arctan2(rel[:, 1], rel[:, 0]) % (2.0 * math.pi) / (2.0 * math.pi) * n
+            j = np.minimum(np.floor(f).astype(np.int64), n - 1)
+            least = np.full(n, np.inf)
+            np.minimum.at(least, j, dist)
+            # A point on the edge between two sectors lies in both (the star's polygon meets
+            # a sector's neighbour there at the sector's reach).
+            low, high = f - j < _TOUCH_EDGE, f - j > 1.0 - _TOUCH_EDGE
+            np.minimum.at(least, (j[low] - 1) % n, dist[low])
+            np.minimum.at(least, (j[high] + 1) % n, dist[high])
+            inner = star.inner_m if star.inner_m is not None else np.zeros(n)
+            reach = star.reach_m
+            pick = (
+                (least <= reach / math.cos(math.pi / n) * (1.0 + _TOUCH))
+                & (least >= (1.0 - _NEAR_EDGE) * reach)
+                & (least > inner)
+                & ~seen
+            )
+            # The next relaxed tour will likely meet the star close by: those sectors too.
+            around = np.zeros(n, dtype=bool)
+            for shift in range(-_AROUND, _AROUND + 1):
+                around |= np.roll(pick, shift)
+            for k in np.flatnonzero(around & ~seen).tolist():
+                edge = reach[k] - least[k] if pick[k] else reach[k]
+                asked.append((float(edge), i, k))
+        if not asked:
+            return None
+        asked.sort()
+        asked = asked[: max(int(budget_s / _FINER_S), 1)]
+        which = np.array([a[1] for a in asked])
+        sector = np.array([a[2] for a in asked])
+        xy = np.array([stars[i].center_xy for i in which.tolist()])
+        ground = terrain.sample(xy[:, 0], xy[:, 1])
+        count = np.array([stars[i].reach_m.size for i in which.tolist()])
+        got = finer_wedges(terrain, xy, ground, camera, count, sector, workers)
+        if hold_m > 0.0:
+            got = np.maximum(got - hold_m, 0.0)
+        new = list(stars)
+        for i in np.unique(which).tolist():
+            new[i] = _finer_star(stars[i], sector[which == i], got[which == i], done)
+        stars_t = tuple(new)
+        inside = (
+            None
+            if regions.depot_xy is None
+            else tuple(_holds(s, regions.depot_xy) for s in stars_t)
+        )
+        return dataclasses.replace(
+            regions,
+            polygons=tuple(_star_polygon(s) for s in stars_t),
+            outer=stars_t,
+            depot_inside=inside,
+        )
+
+    return tighten
+
+
+def _finer_star(
+    star: OuterStar,
+    sector: np.ndarray,
+    wedges: FloatArray,
+    done: dict[tuple[float, float], np.ndarray],
+) -> OuterStar:
+    """The star with ``sector``'s reaches replaced by its wedges' (rows of ``wedges``). The
+    first time, every sector is split into its wedges (the others keep their reach), so the
+    star follows the wedges; after that each sector takes its wedges' greatest reach.
+    ``done`` marks, per star centre, the sectors walked."""
+    n = star.reach_m.size
+    key = star.center_xy
+    if key not in done or (done[key].size == n and not done[key].any()):
+        split = FINER_SPLIT
+        reach = np.repeat(star.reach_m, split)
+        inner = None if star.inner_m is None else np.repeat(star.inner_m, split)
+        fine = (sector[:, None] * split + np.arange(split)[None, :]).ravel()
+        reach[fine] = np.minimum(reach[fine], wedges.ravel())
+        mark = np.zeros(n * split, dtype=bool)
+        mark[fine] = True
+    else:
+        reach = star.reach_m.copy()
+        inner = None if star.inner_m is None else star.inner_m.copy()
+        reach[sector] = np.minimum(reach[sector], wedges.max(axis=1))
+        mark = done[key].copy()
+        mark[sector] = True
+    done[key] = mark
+    if inner is not None:
+        inner = np.minimum(inner, reach)
+    return OuterStar(star.center_xy, reach, inner)
 
 
 def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:

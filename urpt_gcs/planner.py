@@ -19,7 +19,13 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.camera import Frame, true_bearing_deg
-from urpt_gcs.certificate import Certificate, bound_time_s, certify, outer_regions
+from urpt_gcs.certificate import (
+    Certificate,
+    bound_time_s,
+    certify,
+    finer_stars,
+    outer_regions,
+)
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.gtsp import Instance, build_instance, cover_sets, instance_bytes
 from urpt_gcs.inputs import require_memory
@@ -712,7 +718,8 @@ def _certify(
         hold_m=hold_m,
     )
     also = geometric_lower_bound(instance)
-    return certify(regions, flown_m, time_limit_s, also, ratio)
+    tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
+    return certify(regions, flown_m, time_limit_s, also, ratio, tighten)
 
 
 def _read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> _Site:

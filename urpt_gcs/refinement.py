@@ -286,7 +286,7 @@ def tour_along(
         poly = np.roll(poly, -at, axis=0)
     least = float(site.camera.least_half_width_m(site.ground_m).min())
     around = float(np.hypot(*np.diff(np.vstack([poly, poly[:1]]), axis=0).T).sum())
-    samples = _along(poly, max(_ALONG_SHARE * least, around / _ALONG_MOST))
+    samples = points_along(poly, max(_ALONG_SHARE * least, around / _ALONG_MOST))
     m = len(site.targets_xy)
     cone = site.camera.cone_radius_m(site.ground_m)
     # Per target its nearest samples, nearest first; those in its cone (the nearest at least).
@@ -351,7 +351,7 @@ _NEAREST = 1024
 _TOWARDS_STEPS = 40
 
 
-def _along(poly: FloatArray, spacing_m: float) -> FloatArray:
+def points_along(poly: FloatArray, spacing_m: float) -> FloatArray:
     """Points along the closed polyline, in order, no more than ``spacing_m`` apart, every
     vertex among them."""
     ends = np.roll(poly, -1, axis=0)
@@ -543,4 +543,12 @@ def written_grid(
     return written
 
 
-__all__ = ["Refinement", "Site", "refine_along", "refine_tour", "tour_along", "written_grid"]
+__all__ = [
+    "Refinement",
+    "Site",
+    "points_along",
+    "refine_along",
+    "refine_tour",
+    "tour_along",
+    "written_grid",
+]

@@ -488,9 +488,10 @@ def _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, heig
 
 
 @njit(cache=True, nogil=True)
-def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, outer, inner):  # type: ignore[no-untyped-def]
-    """Per target ``k`` and sector ``j``: into ``outer[k, j]`` a reach no point of the sector
-    that sees the target exceeds, into ``inner[k, j]`` one up to which every point does.
+def _sector_reach(z, col0, row0, ground, height, cone, least, a, b, d, e, step, t0, t1, scale):  # type: ignore[no-untyped-def]
+    """For the target at pixel ``(col0, row0)`` and the sector of azimuths ``[t0, t1]``: a
+    reach no point of the sector that sees the target exceeds, and one up to which every
+    point does.
 
     The sector is walked in bands ``[s0, s0 + step]``; over a band the surface lies between
     ``lo`` and ``hi`` and its slope is at most ``g``. A plane point at ``s`` of the sector is
@@ -501,59 +502,76 @@ def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, o
     ``s'`` before them: in a band that ratio is at most ``(hi - z_p) / s0``, and at most the
     steepest slope ``G`` of the bands from the target to it (``z(s') - z_p <= G s'``).
     """
+    best = cone
+    sure = least
+    steepest = 0.0
+    i = 0
+    while i * step < max(best, sure):
+        s0 = i * step
+        lo, hi, g = _box_range(z, col0, row0, a, b, d, e, s0, s0 + step, t0, t1, scale)
+        if math.isnan(lo):
+            # Every point from here on is off the grid, or seen across it.
+            best = min(best, s0)
+            sure = min(sure, s0)
+            break
+        if s0 == 0.0:
+            # The first band gives nothing from its start, the target itself; its slices
+            # give the slope the target stands on.
+            best = min(
+                best,
+                _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, height),
+            )
+        elif s0 < best:
+            reach = _band_reach(s0, lo, ground, height)
+            if reach < best * _FINE_NEAR:
+                # A band that may end the reach: its slices, each with its own lowest
+                # ground, from its own start, are tighter.
+                reach = min(
+                    reach,
+                    _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, height),
+                )
+            best = min(best, reach)
+        if s0 < sure and math.isinf(hi):
+            sure = s0
+        elif s0 < sure:
+            steepest = max(steepest, g)
+            ratio = 0.0
+            if hi > ground:
+                ratio = steepest
+                if s0 > 0.0:
+                    ratio = min(ratio, (hi - ground) / s0)
+            if ratio > 0.0:
+                sure = min(sure, height / ratio)
+        i += 1
+    return best, min(sure, best)
+
+
+@njit(cache=True, nogil=True)
+def _star_kernel(z, col0, row0, ground, height, cone, least, a, b, d, e, step, outer, inner):  # type: ignore[no-untyped-def]
+    """Per target ``k`` and sector ``j`` (of ``outer.shape[1]`` around it) the reaches of
+    :func:`_sector_reach`, into ``outer[k, j]`` and ``inner[k, j]``."""
     sectors = outer.shape[1]
     scale = math.sqrt(a * a + b * b + d * d + e * e)
     for k in range(col0.shape[0]):
         for j in range(sectors):
             t0 = 2.0 * math.pi * j / sectors
             t1 = 2.0 * math.pi * (j + 1) / sectors
-            best = cone[k]
-            sure = least[k]
-            steepest = 0.0
-            i = 0
-            while i * step < max(best, sure):
-                s0 = i * step
-                lo, hi, g = _box_range(
-                    z, col0[k], row0[k], a, b, d, e, s0, s0 + step, t0, t1, scale
-                )
-                if math.isnan(lo):
-                    # Every point from here on is off the grid, or seen across it.
-                    best = min(best, s0)
-                    sure = min(sure, s0)
-                    break
-                if s0 == 0.0:
-                    # The first band gives nothing from its start, the target itself; its
-                    # slices give the slope the target stands on.
-                    best = min(
-                        best,
-                        _fine_reach(z, col0[k], row0[k], a, b, d, e, s0, step, t0, t1,
-                                    scale, ground[k], height[k]),
-                    )  # fmt: skip
-                elif s0 < best:
-                    reach = _band_reach(s0, lo, ground[k], height[k])
-                    if reach < best * _FINE_NEAR:
-                        # A band that may end the reach: its slices, each with its own
-                        # lowest ground, from its own start, are tighter.
-                        reach = min(
-                            reach,
-                            _fine_reach(z, col0[k], row0[k], a, b, d, e, s0, step, t0, t1,
-                                        scale, ground[k], height[k]),
-                        )  # fmt: skip
-                    best = min(best, reach)
-                if s0 < sure and math.isinf(hi):
-                    sure = s0
-                elif s0 < sure:
-                    steepest = max(steepest, g)
-                    ratio = 0.0
-                    if hi > ground[k]:
-                        ratio = steepest
-                        if s0 > 0.0:
-                            ratio = min(ratio, (hi - ground[k]) / s0)
-                    if ratio > 0.0:
-                        sure = min(sure, height[k] / ratio)
-                i += 1
-            outer[k, j] = best
-            inner[k, j] = min(sure, best)
+            outer[k, j], inner[k, j] = _sector_reach(
+                z, col0[k], row0[k], ground[k], height[k], cone[k], least[k],
+                a, b, d, e, step, t0, t1, scale,
+            )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _wedge_kernel(z, col0, row0, ground, height, cone, a, b, d, e, step, t0, t1, outer):  # type: ignore[no-untyped-def]
+    """Per wedge ``w`` (of the target at pixel ``(col0[w], row0[w])``, azimuths
+    ``[t0[w], t1[w]]``) the outer reach of :func:`_sector_reach` into ``outer[w]``."""
+    scale = math.sqrt(a * a + b * b + d * d + e * e)
+    for w in range(col0.shape[0]):
+        outer[w] = _sector_reach(
+            z, col0[w], row0[w], ground[w], height[w], cone[w], 0.0,
+            a, b, d, e, step, t0[w], t1[w], scale,
+        )[0]  # fmt: skip
 
 
 def star_reach(
@@ -609,3 +627,77 @@ def star_reach(
                 future.result()
     inner *= 1.0 - 1e-9
     return outer, inner
+
+
+# A sector walked again for a tighter outer reach is split into this many wedges, each
+# walked in bands this many times narrower than the star's.
+FINER_SPLIT = 8
+FINER_BANDS = 4
+
+
+def finer_reach(
+    terrain: Terrain,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    sectors: npt.ArrayLike,
+    sector: npt.ArrayLike,
+    workers: int | None = 1,
+) -> FloatArray:
+    """A tighter outer reach for sector ``sector[i]`` (of ``sectors`` around target ``i``,
+    one row of ``targets_xy`` and ``ground_m`` per sector asked for): the greatest of its
+    wedges' reaches (:func:`finer_wedges`)."""
+    got: FloatArray = finer_wedges(
+        terrain, targets_xy, ground_m, camera, sectors, sector, workers
+    ).max(axis=1)
+    return got
+
+
+def finer_wedges(
+    terrain: Terrain,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    camera: Camera,
+    sectors: npt.ArrayLike,
+    sector: npt.ArrayLike,
+    workers: int | None = 1,
+) -> FloatArray:
+    """Sector ``sector[i]`` (of ``sectors[i]``, or of ``sectors``, around target ``i``) split
+    into :data:`FINER_SPLIT` wedges, shape (sectors asked, FINER_SPLIT): each wedge walked as
+    :func:`star_reach` walks a sector, in bands :data:`FINER_BANDS` times narrower, so no
+    point of the wedge farther than its reach sees the target."""
+    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    j = np.asarray(sector, dtype=np.int64).reshape(-1)
+    n = len(j)
+    if n == 0:
+        return np.zeros((0, FINER_SPLIT))
+    rep = np.repeat(np.arange(n), FINER_SPLIT)
+    ground = np.ascontiguousarray(np.asarray(ground_m, dtype=np.float64)[rep])
+    height = np.ascontiguousarray(camera.altitude_m - ground)
+    cone = np.ascontiguousarray(camera.cone_radius_m(ground))
+    col0, row0 = terrain.pixel_coords(xy[rep, 0], xy[rep, 1])
+    col0, row0 = np.ascontiguousarray(col0), np.ascontiguousarray(row0)
+    part = np.tile(np.arange(FINER_SPLIT), n)
+    width = 2.0 * math.pi / np.broadcast_to(np.asarray(sectors, dtype=np.float64), (n,))[rep]
+    t0 = np.ascontiguousarray(width * (j[rep] + part / FINER_SPLIT))
+    t1 = np.ascontiguousarray(width * (j[rep] + (part + 1) / FINER_SPLIT))
+    inv = ~terrain.transform
+    step = terrain.cell_m / 2.0 / FINER_BANDS
+    outer = np.zeros(len(rep))
+
+    def run(lo: int, hi: int) -> None:
+        _wedge_kernel(
+            terrain.elevation_m, col0[lo:hi], row0[lo:hi], ground[lo:hi], height[lo:hi],
+            cone[lo:hi], inv.a, inv.b, inv.d, inv.e, step, t0[lo:hi], t1[lo:hi], outer[lo:hi],
+        )  # fmt: skip
+
+    threads = min(resolve_workers(workers), max(len(rep) // 64, 1))
+    if threads <= 1:
+        run(0, len(rep))
+    else:
+        bounds = np.linspace(0, len(rep), 2 * threads + 1).astype(np.intp).tolist()
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
+                future.result()
+    got: FloatArray = outer.reshape(n, FINER_SPLIT)
+    return got

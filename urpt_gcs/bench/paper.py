@@ -32,7 +32,7 @@ import pyproj
 from affine import Affine
 
 from urpt_gcs.bench import rows_csv
-from urpt_gcs.certificate import Certificate, certify, outer_regions
+from urpt_gcs.certificate import Certificate, certify, finer_stars, outer_regions
 from urpt_gcs.cluster import map_jobs
 from urpt_gcs.gtsp import Covers, Instance, build_instance
 from urpt_gcs.outputs.output import write_all
@@ -193,7 +193,8 @@ def run_instance(
     refined, done = refine_tour(site, exact, None, REFINE_S)
     regions, ratio = outer_regions(terrain, targets, ground, camera, None)
     paper_bound = paper_lower_bound(targets, fov_deg)
-    cert = certify(regions, refined.length, bound_s, paper_bound, ratio)
+    tighten = finer_stars(terrain, camera)
+    cert = certify(regions, refined.length, bound_s, paper_bound, ratio, tighten)
     refined, refine_s = _from_bound(site, cert, refined, done.seconds)
     name = "heuristic" if "heuristic" in SOLVERS else "ortools"
     heur = solve(inst, name, SolveSettings(time_limit_s=heuristic_s, seed=terrain_seed))

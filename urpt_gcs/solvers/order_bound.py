@@ -38,6 +38,7 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 import shapely
+from scipy.spatial import ConvexHull, QhullError
 from shapely.geometry import LineString, Point, Polygon
 
 from urpt_gcs.solvers.regions import OuterStar
@@ -48,6 +49,8 @@ I64 = npt.NDArray[np.int64]
 # Sub-arcs per turn at least: each is covered by the triangle of its tangents, at most
 # 1 / cos(pi / 256) - 1 = 7.5e-5 relative beyond the arc.
 _SUBARCS = 256
+# Hulls of more points than this are Qhull's (scipy), fewer the monotone chain's.
+_QHULL_FROM = 64
 # Primal-dual iterations per node, and how often the certificate is evaluated.
 _NODE_ITERATIONS = 4000
 _CHECK_EVERY = 25
@@ -67,22 +70,27 @@ def star_hull(star: OuterStar, k0: int, count: int) -> FloatArray:
     n = star.reach_m.size
     sub = max(1, -(-_SUBARCS // n))
     cx, cy = star.center_xy
-    pts = [(cx, cy)]
-    for j in range(count):
-        k = (k0 + j) % n
-        r = float(star.reach_m[k])
-        if r <= 0.0:
-            continue
-        for s in range(sub):
-            a = 2.0 * math.pi * (k + s / sub) / n
-            b = 2.0 * math.pi * (k + (s + 1) / sub) / n
-            tip = r / math.cos(0.5 * (b - a)) * (1.0 + 1e-12)
-            m = 0.5 * (a + b)
-            rr = r * (1.0 + 1e-12)
-            pts.append((cx + rr * math.cos(a), cy + rr * math.sin(a)))
-            pts.append((cx + tip * math.cos(m), cy + tip * math.sin(m)))
-            pts.append((cx + rr * math.cos(b), cy + rr * math.sin(b)))
-    return _hull(np.asarray(pts, dtype=np.float64))
+    k = (k0 + np.arange(count)) % n
+    r = star.reach_m[k]
+    k, r = k[r > 0.0], r[r > 0.0]
+    s = np.arange(sub)
+    a = (2.0 * math.pi / n) * (k[:, None] + s[None, :] / sub)
+    b = (2.0 * math.pi / n) * (k[:, None] + (s[None, :] + 1) / sub)
+    rr = np.repeat(r[:, None], sub, axis=1) * (1.0 + 1e-12)
+    tip = rr / math.cos(math.pi / (n * sub))
+    m = 0.5 * (a + b)
+    ang = np.concatenate([a.ravel(), m.ravel(), b.ravel()])
+    rad = np.concatenate([rr.ravel(), tip.ravel(), rr.ravel()])
+    pts = np.vstack([[cx, cy], np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang)])])
+    if len(pts) > _QHULL_FROM:
+        try:
+            hull = ConvexHull(pts)
+        except QhullError:
+            return _hull(pts)
+        # Qhull gives a 2-d hull's vertices counter-clockwise.
+        out: FloatArray = pts[hull.vertices]
+        return out
+    return _hull(pts)
 
 
 def _hull(pts: FloatArray) -> FloatArray:
