@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -268,6 +269,21 @@ def _reach_kernel(z, col0, row0, ground, height, cone, dcol, drow, step, start_s
             reach[k, a] = best
 
 
+def _in_threads(
+    run: Callable[[int, int], None], count: int, workers: int | None, least: int, parts: int
+) -> None:
+    """``run(lo, hi)`` over ``0 .. count`` in ``parts`` ranges per thread, a thread per
+    ``least`` items at most (one range when a single thread is used)."""
+    threads = min(resolve_workers(workers), max(count // least, 1))
+    if threads <= 1:
+        run(0, count)
+        return
+    bounds = np.linspace(0, count, parts * threads + 1).astype(np.intp).tolist()
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
+            future.result()
+
+
 def ray_reach(
     terrain: Terrain,
     targets_xy: FloatArray,
@@ -317,14 +333,7 @@ def ray_reach(
             reach[lo:hi],
         )
 
-    threads = min(resolve_workers(workers), max(m // _MIN_PARALLEL_TARGETS, 1))
-    if threads <= 1:
-        run(0, m)
-    else:
-        bounds = np.linspace(0, m, 4 * threads + 1).astype(np.intp).tolist()
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
-                future.result()
+    _in_threads(run, m, workers, _MIN_PARALLEL_TARGETS, 4)
     return reach
 
 
@@ -617,14 +626,7 @@ def star_reach(
             least[lo:hi], inv.a, inv.b, inv.d, inv.e, step, outer[lo:hi], inner[lo:hi],
         )  # fmt: skip
 
-    threads = min(resolve_workers(workers), max(m // 4, 1))
-    if threads <= 1:
-        run(0, m)
-    else:
-        bounds = np.linspace(0, m, 2 * threads + 1).astype(np.intp).tolist()
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
-                future.result()
+    _in_threads(run, m, workers, 4, 2)
     inner *= 1.0 - 1e-9
     return outer, inner
 
@@ -691,13 +693,6 @@ def finer_wedges(
             cone[lo:hi], inv.a, inv.b, inv.d, inv.e, step, t0[lo:hi], t1[lo:hi], outer[lo:hi],
         )  # fmt: skip
 
-    threads = min(resolve_workers(workers), max(len(rep) // 64, 1))
-    if threads <= 1:
-        run(0, len(rep))
-    else:
-        bounds = np.linspace(0, len(rep), 2 * threads + 1).astype(np.intp).tolist()
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
-                future.result()
+    _in_threads(run, len(rep), workers, 64, 2)
     got: FloatArray = outer.reshape(n, FINER_SPLIT)
     return got
