@@ -757,6 +757,17 @@ def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
     return np.ascontiguousarray(out)
 
 
+def _among(discs: FloatArray, kept: IntArray, k: int = NEIGHBOURS) -> IntArray:
+    """Neighbour rows for the discs ``kept`` among themselves (rows of other discs unused).
+
+    With the stops whose disc a leg crosses anyway taken out, a disc's nearest discs are
+    mostly out of the tour too, and moves next to them are never tried."""
+    local = neighbours(discs[kept], k)
+    out = np.zeros((len(discs), local.shape[1]), dtype=np.int64)
+    out[kept] = kept[local]
+    return out
+
+
 def improve(
     seq: IntArray,
     pts: FloatArray,
@@ -810,7 +821,7 @@ def improve(
             tol = _MIN_GAIN * path_length(pts, ends)
             m, taken = _strip(seq, pts, pos, ends, tol)
             if m >= 4:
-                _descend(seq[:m], pts[:m], pos, discs, ends, neigh, 0, m - 1)
+                _descend(seq[:m], pts[:m], pos, discs, ends, _among(discs, seq[:m]), 0, m - 1)
             _put_back(seq, pts, pos, discs, ends, m, taken)
             _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
         length = path_length(pts, ends)
