@@ -85,7 +85,7 @@ def test_polygon_bound_never_above_a_brute_force_tour() -> None:
         own = np.zeros(len(pts), dtype=np.int64) + polys.index(p)
         sets.append(pts[regions.contains(pts, own)])
     brute = _brute_force(sets, regions.depot_xy)
-    bound = lower_bound(regions, upper=brute * 2.0, time_limit_s=0.5)
+    bound = lower_bound(regions, upper=brute * 2.0, time_limit_s=5.0)  # it finishes well within
     assert 0.8 * brute <= bound.value <= brute * (1.0 + 1e-9)
 
 

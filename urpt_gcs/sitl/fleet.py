@@ -113,7 +113,8 @@ def fly_fleet(
     start_delays_s: Sequence[float] | None = None,
 ) -> list[Flight]:
     """Fly every mission at once, one vehicle each, in mission order; vehicle ``k`` arms
-    ``start_delays_s[k]`` simulated seconds after the common start (all at once if None).
+    ``start_delays_s[k]`` simulated seconds after the common start (all at once if None),
+    counted from when the vehicle planned just before it really armed.
 
     Raises
     ------
@@ -191,10 +192,21 @@ async def _fly_all(
     from urpt_gcs.drone.mavsdk_link import connect
 
     gate = _TogetherGate(len(missions))
+    armed = [asyncio.Event() for _ in missions]
 
     async def one(number: int, url: str, where: str, mission: Mission) -> Flight:
         prefix = f"vehicle {number}: "
         delay_s = delays_s[number - 1]
+        # The stagger is kept from the take-off before it as it really happened: a vehicle
+        # waits for those planned before it to be armed (one that was slow to arm would
+        # otherwise fly in the gap the plan left), then its own difference.
+        earlier = [k for k, d in enumerate(delays_s) if d < delay_s]
+        after = max(earlier, key=lambda k: delays_s[k], default=None)
+
+        async def ready() -> None:
+            await gate.wait()
+            if after is not None:
+                await armed[after].wait()
 
         try:
             async with connect(url, CONNECT_TIMEOUT_S) as link:
@@ -205,8 +217,9 @@ async def _fly_all(
                     timeout_s + delay_s / settings.speedup,
                     lambda m: say(prefix + m),
                     where,
-                    gate.wait,
-                    delay_s,
+                    ready,
+                    delay_s if after is None else delay_s - delays_s[after],
+                    armed[number - 1].set,
                 )
         except LinkError as exc:
             raise LinkError(f"vehicle {number}: {exc}") from None

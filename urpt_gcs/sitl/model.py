@@ -81,6 +81,7 @@ class Vehicle:
             px4=settings.px4,
         )
         self.store.corrupt_seq = settings.corrupt_seq
+        self.arm_refusals_left = settings.arm_refusals
         self.time_s = 0.0
         self.armed = False
         self.mode = int(mavlink.COPTER_MODE_STABILIZE)
@@ -179,6 +180,10 @@ class Vehicle:
         auto_ok = int(self.params["AUTO_OPTIONS"]) & AUTO_OPTION_ALLOW_ARMING
         if self.booting(now_wall_s):
             self.say("PreArm: waiting for position estimate", mavlink.MAV_SEVERITY_CRITICAL)
+            return int(mavlink.MAV_RESULT_FAILED)
+        if self.arm_refusals_left > 0:
+            self.arm_refusals_left -= 1
+            self.say("PreArm: gyros still settling", mavlink.MAV_SEVERITY_CRITICAL)
             return int(mavlink.MAV_RESULT_FAILED)
         if self.mode in NOT_ARMABLE or (self.mode == mavlink.COPTER_MODE_AUTO and not auto_ok):
             self.say(f"Arm: {mode_name(self.mode)} mode not armable", mavlink.MAV_SEVERITY_CRITICAL)

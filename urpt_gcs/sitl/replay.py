@@ -438,10 +438,12 @@ async def _fly(
     where: str,
     before_arming: Callable[[], Awaitable[None]] | None = None,
     start_delay_s: float = 0.0,
+    after_arming: Callable[[], None] | None = None,
 ) -> Flight:
     """Upload, arm and fly; ``before_arming``, if given, is awaited once the vehicle is
     ready to arm (a fleet's vehicles wait there for each other), and the vehicle then waits
-    ``start_delay_s`` more on its own clock before it arms."""
+    ``start_delay_s`` more on its own clock before it arms; ``after_arming`` is called once
+    it is armed."""
     upload = await upload_verified(link, mission, UploadSettings(), say)
     vehicle = await identify(link, where)
     param, telemetry, action = (
@@ -455,11 +457,14 @@ async def _fly(
     try:
         await telemetry.set_rate_position(settings.position_rate_hz)
         if mission.firmware == "px4":
-            await _start_px4(link, system_id, param, action, mission, say, before_arming)
+            await _start_px4(
+                link, system_id, param, action, mission, say, before_arming, after_arming
+            )
         else:
             await _start_ardupilot(
-                link, param, action, watch, settings, say, before_arming, start_delay_s
-            )
+                link, param, action, watch, settings, say, before_arming, start_delay_s,
+                after_arming,
+            )  # fmt: skip
         await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
     except asyncio.TimeoutError:
         raise LinkError(
@@ -489,9 +494,11 @@ async def _start_ardupilot(
     say: Progress,
     before_arming: Callable[[], Awaitable[None]] | None = None,
     start_delay_s: float = 0.0,
+    after_arming: Callable[[], None] | None = None,
 ) -> None:
     """Arm in GUIDED and start AUTO, taking off as ``settings.takeoff`` says; with
-    ``before_arming``, arm ``start_delay_s`` after it returns, timed on the vehicle's clock."""
+    ``before_arming``, arm ``start_delay_s`` after it returns, timed on the vehicle's clock;
+    ``after_arming`` is called once armed."""
     if settings.takeoff == "auto-options":
         await param.set_param_int("AUTO_OPTIONS", AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE)
     retry_s = ARM_RETRY_S
@@ -508,6 +515,8 @@ async def _start_ardupilot(
         retry_s = ARM_RETRY_TOGETHER_S
     say("arming")
     await _arm_when_ready(link, action, watch, ARM_WAIT_S, retry_s, say)
+    if after_arming is not None:
+        after_arming()
     if settings.takeoff == "guided":
         await action.set_takeoff_altitude(GUIDED_TAKEOFF_M)
         await action.takeoff()
@@ -537,6 +546,7 @@ async def _start_px4(
     mission: Mission,
     say: Progress,
     before_arming: Callable[[], Awaitable[None]] | None = None,
+    after_arming: Callable[[], None] | None = None,
 ) -> None:
     """Arm and MAV_CMD_MISSION_START: PX4 then takes off and flies the mission in AUTO."""
     # MPC_XY_CRUISE is the speed PX4 flies between waypoints until the mission's own speed
@@ -546,6 +556,8 @@ async def _start_px4(
         await before_arming()
     say("arming")
     await _arm_retrying(action, ARM_WAIT_S)
+    if after_arming is not None:
+        after_arming()
     say("flying the mission (MAV_CMD_MISSION_START)")
     await _command(link, system_id, mavlink.MAV_CMD_MISSION_START)
 

@@ -46,6 +46,9 @@ class VehicleSettings:
         Read this seq back altered (about 1 m north): a fault for testing read-back checks.
     system_id
         MAVLink system id.
+    arm_refusals
+        Refuse this many arming commands after start-up ("PreArm: ..."), as a vehicle slow to
+        pass its checks does: a fault for testing a fleet's staggered take-offs.
     """
 
     home: GeoPoint = DEFAULT_HOME
@@ -60,6 +63,7 @@ class VehicleSettings:
     seed: int = 0
     corrupt_seq: int | None = None
     system_id: int = 1
+    arm_refusals: int = 0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speedup) and 0.1 <= self.speedup <= 1000.0):
@@ -78,6 +82,8 @@ class VehicleSettings:
             raise SettingsError(f"--boot {self.boot_s} s is out of range; use 0 to 600 s")
         if not 0 <= self.seed <= 2**32 - 1:
             raise SettingsError(f"--seed {self.seed} is out of range; use 0 to {2**32 - 1}")
+        if not 0 <= self.arm_refusals <= 10_000:
+            raise SettingsError(f"{self.arm_refusals} arm refusals is out of range; use 0 to 10000")
         if not 1 <= self.system_id <= 250:
             raise SettingsError(f"system id {self.system_id} is out of range; use 1 to 250")
 
