@@ -241,3 +241,28 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
     length = float(np.hypot(*np.diff(np.vstack([ring, ring[:1]]), axis=0).T).sum())
     assert abs(length - tour.length) <= 1e-9 * length
     assert length <= tour.discrete_length + 1e-9
+
+
+def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered() -> None:
+    """Past 200 discs the search also starts from the nearest-neighbour tour of centres: that
+    tour holds every disc once, and the tour kept enters every disc (by a distance of its
+    own), is as long as its legs, and is no longer than the nearest-neighbour tour."""
+    from urpt_gcs.solvers.continuous import _SECOND_START_FROM, _nearest_neighbour
+
+    rng = np.random.default_rng(11)
+    n = _SECOND_START_FROM + 19
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 4.0, n)])
+    regions = RegionSet(discs=discs, depot_xy=(50.0, 50.0))
+    order, centres = _nearest_neighbour(regions)
+    assert sorted(order.tolist()) == list(range(n))
+    assert np.array_equal(centres, discs[order, :2])
+    nn_m = float(
+        np.hypot(*np.diff(np.vstack([[50.0, 50.0], centres, [50.0, 50.0]]), axis=0).T).sum()
+    )
+    tour = solve_regions(regions, SolveSettings(time_limit_s=4.0))
+    assert sorted(tour.touch_region.tolist()) == list(range(n))
+    off = np.hypot(*(tour.touch_xy - discs[tour.touch_region, :2]).T) - discs[tour.touch_region, 2]
+    assert (off <= 1e-9).all()
+    legs = np.vstack([[50.0, 50.0], tour.touch_xy, [50.0, 50.0]])
+    assert tour.length == pytest.approx(float(np.hypot(*np.diff(legs, axis=0).T).sum()), rel=1e-9)
+    assert tour.lower_bound <= tour.length < nn_m
