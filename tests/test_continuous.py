@@ -244,7 +244,7 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
 
 
 def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered() -> None:
-    """Past 200 discs the search also starts from the nearest-neighbour tour of centres: that
+    """From 600 discs the search also starts from the nearest-neighbour tour of centres: that
     tour holds every disc once, and the tour kept enters every disc (by a distance of its
     own), is as long as its legs, and is no longer than the nearest-neighbour tour."""
     from urpt_gcs.solvers.continuous import _SECOND_START_FROM, _nearest_neighbour

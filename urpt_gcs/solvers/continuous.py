@@ -43,9 +43,10 @@ _ROUNDS = 3
 # continuous order search (:mod:`urpt_gcs.solvers.disc_tour`) has the rest.
 _DISC_ROUNDS = 2
 _DISC_DISCRETE_SHARE = 0.5
-# From this many discs (a dozen candidates each or fewer, the sample budget shared out) the
-# continuous search also starts from a nearest-neighbour tour, half its time each.
-_SECOND_START_FROM = 201
+# From this many discs (the sample budget shared out leaves each the fewest candidates) the
+# continuous search also starts from a nearest-neighbour tour, half its time each. (From 201
+# discs it cost rd400_or10 and pcb442_or10 about 1 % at 60 s; past 600 it gained 2-5 %.)
+_SECOND_START_FROM = _DISC_SAMPLE_BUDGET // _MIN_DISC_SAMPLES
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
