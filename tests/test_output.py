@@ -212,8 +212,14 @@ def test_ctrl_c_during_the_undo_waits_for_it(
         real(src, dst)
 
     monkeypatch.setattr(os, "replace", replace)
-    with pytest.raises(KeyboardInterrupt):
-        write_products(sorties, out, with_map=False)
+    # Ctrl-C as at a terminal: a suite run as a shell's background job inherits SIGINT
+    # ignored, and the writer leaves an ignored signal ignored.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            write_products(sorties, out, with_map=False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert tree(tmp_path) == before
     assert temporaries(tmp_path) == []
 

@@ -661,3 +661,47 @@ def test_the_report_names_the_simulated_copter() -> None:
     assert first.endswith(
         "on the simulated ArduCopter (urpt-gcs), which reports itself as ArduPilot 4.6.0"
     )
+
+
+@pytest.mark.parametrize(("denials", "ok"), [(2, True), (99, False)])
+def test_px4_start_is_asked_again_while_denied(
+    denials: int, ok: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """PX4 denies MISSION_START until its navigator holds the mission as valid: the start is
+    asked again (armed again first) a bounded number of times, and a vehicle that keeps
+    denying it is named with how often it was asked."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    from urpt_gcs.errors import LinkError
+    from urpt_gcs.sitl import replay as r
+
+    sent: list[int] = []
+    arms = [0]
+
+    async def send(_link: object, _sysid: int, command: int, *_p: float) -> int:
+        sent.append(command)
+        denied = len(sent) <= denials
+        return int(mav.MAV_RESULT_DENIED if denied else mav.MAV_RESULT_ACCEPTED)
+
+    async def arm(_action: object, _wait_s: float) -> None:
+        arms[0] += 1
+
+    async def no_param(*_a: object) -> None:
+        return None
+
+    monkeypatch.setattr(r, "_send_command", send)
+    monkeypatch.setattr(r, "_arm_retrying", arm)
+    monkeypatch.setattr(r, "MISSION_START_RETRY_S", 0.0)
+    param = SimpleNamespace(set_param_float=no_param)
+    mission = SimpleNamespace(cruise_speed_m_s=5.0)
+    run = r._start_px4(None, 1, param, None, mission, lambda _m: None)  # type: ignore[arg-type]
+    if ok:
+        asyncio.run(run)
+        assert sent == [mav.MAV_CMD_MISSION_START] * 3 and arms[0] == 3
+    else:
+        with pytest.raises(LinkError, match=r"MAV_RESULT_DENIED \(asked 10 times\)"):
+            asyncio.run(run)
+        assert len(sent) == r.MISSION_START_TRIES

@@ -64,6 +64,9 @@ ARM_WAIT_S = 90.0
 ARM_RETRY_S = 2.0
 # Vehicles of a fleet that are to take off together ask again sooner.
 ARM_RETRY_TOGETHER_S = 0.1
+# MAV_CMD_MISSION_START asked again while PX4 denies it, at most this often, this far apart.
+MISSION_START_TRIES = 10
+MISSION_START_RETRY_S = 0.3
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
 # ArduCopter arms in GUIDED once it has a position, and AUTO can take off from it.
@@ -559,7 +562,18 @@ async def _start_px4(
     if after_arming is not None:
         after_arming()
     say("flying the mission (MAV_CMD_MISSION_START)")
-    await _command(link, system_id, mavlink.MAV_CMD_MISSION_START)
+    # PX4 denies the start until its navigator has published the uploaded mission as valid,
+    # which can come just after arming; it disarms again if left on the ground, so each try
+    # arms first (accepted at once when armed).
+    for attempt in range(MISSION_START_TRIES):
+        result = await _send_command(link, system_id, mavlink.MAV_CMD_MISSION_START)
+        retry = (mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
+        if result not in retry or attempt == MISSION_START_TRIES - 1:
+            _accepted(mavlink.MAV_CMD_MISSION_START, result, attempt + 1)
+            return
+        say("the start was refused: asking again")
+        await asyncio.sleep(MISSION_START_RETRY_S)
+        await _arm_retrying(action, ARM_WAIT_S)
 
 
 async def _send_command(
@@ -582,11 +596,16 @@ async def _send_command(
 
 async def _command(link: MavsdkLink, system_id: int, command: int) -> None:
     """COMMAND_LONG without params; LinkError with the vehicle's MAV_RESULT unless accepted."""
-    result = await _send_command(link, system_id, command)
+    _accepted(command, await _send_command(link, system_id, command))
+
+
+def _accepted(command: int, result: int | None, tries: int = 1) -> None:
+    """LinkError naming the vehicle's MAV_RESULT unless it accepted ``command``."""
     if result != mavlink.MAV_RESULT_ACCEPTED:
         entry = mavlink.enums["MAV_RESULT"].get(result) if result is not None else None
         name = entry.name if entry is not None else "no answer"
-        raise LinkError(f"the vehicle did not accept {command_name(command)}: {name}")
+        times = f" (asked {tries} times)" if tries > 1 else ""
+        raise LinkError(f"the vehicle did not accept {command_name(command)}: {name}{times}")
 
 
 async def _until_armable(link: MavsdkLink, watch: _Watch, wait_s: float) -> None:
