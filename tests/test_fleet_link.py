@@ -23,6 +23,7 @@ from conftest import DEMO, SHARED
 from fleet_helpers import HOME_EAST, SITE, TARGETS, Vehicle, build_fleet
 from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from scipy.ndimage import minimum_filter1d
 
 from urpt_gcs.cli import main
 from urpt_gcs.drone.fleet_upload import upload_fleet
@@ -257,10 +258,7 @@ def independent_closest(
         own = np.array([p.time_s for p in flight.track])
         late = wall - own / speedup
         half = max(1, round(len(wall) / (wall[-1] - wall[0])))  # samples in a second
-        windows = np.lib.stride_tricks.sliding_window_view(
-            np.pad(late, half, mode="edge"), 2 * half + 1
-        )
-        t = own / speedup + windows.min(axis=1)
+        t = own / speedup + minimum_filter1d(late, 2 * half + 1, mode="nearest")
         xyz = np.array(
             [
                 (p.lon_deg * metres_lon, p.lat_deg * metres_lat, ground + p.alt_rel_m)

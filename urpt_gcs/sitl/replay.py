@@ -67,6 +67,7 @@ ARM_RETRY_TOGETHER_S = 0.1
 # MAV_CMD_MISSION_START asked again while PX4 denies it, at most this often, this far apart.
 MISSION_START_TRIES = 10
 MISSION_START_RETRY_S = 0.3
+_ASK_AGAIN = (mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
 PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
 # ArduCopter arms in GUIDED once it has a position, and AUTO can take off from it.
@@ -567,8 +568,7 @@ async def _start_px4(
     # arms first (accepted at once when armed).
     for attempt in range(MISSION_START_TRIES):
         result = await _send_command(link, system_id, mavlink.MAV_CMD_MISSION_START)
-        retry = (mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
-        if result not in retry or attempt == MISSION_START_TRIES - 1:
+        if result not in _ASK_AGAIN or attempt == MISSION_START_TRIES - 1:
             _accepted(mavlink.MAV_CMD_MISSION_START, result, attempt + 1)
             return
         say("the start was refused: asking again")

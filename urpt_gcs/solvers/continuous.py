@@ -316,16 +316,16 @@ def _nearest_neighbour(regions: RegionSet) -> tuple[IntArray, FloatArray]:
     order = np.empty(n, dtype=np.int64)
     here = np.asarray(regions.depot_xy if regions.depot_xy is not None else centres[0])
     for step in range(n):
-        k = min(n, 8)
-        while True:
-            _, idx = tree.query(here, k=k)
-            free = [int(i) for i in np.atleast_1d(idx) if left[i]]
-            if free or k == n:
-                break
-            k = min(n, 4 * k)
-        order[step] = free[0]
-        left[free[0]] = False
-        here = centres[free[0]]
+        _, idx = tree.query(here, k=min(n, 8))
+        free = [int(i) for i in np.atleast_1d(idx) if left[i]]
+        if free:
+            nearest = free[0]
+        else:  # the nearest ones taken: the nearest of those left
+            rest = np.flatnonzero(left)
+            nearest = int(rest[np.argmin(np.hypot(*(centres[rest] - here).T))])
+        order[step] = nearest
+        left[nearest] = False
+        here = centres[nearest]
     return order, centres[order].copy()
 
 
