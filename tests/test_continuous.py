@@ -266,3 +266,35 @@ def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered() -> 
     legs = np.vstack([[50.0, 50.0], tour.touch_xy, [50.0, 50.0]])
     assert tour.length == pytest.approx(float(np.hypot(*np.diff(legs, axis=0).T).sum()), rel=1e-9)
     assert tour.lower_bound <= tour.length < nn_m
+
+
+def test_cheapest_insertion_matches_a_scan_of_every_leg() -> None:
+    # The insertion skips legs by a lower bound of their cost and takes the first leg that
+    # crosses the disc: its cost must still be the least over every leg, found by brute force.
+    from urpt_gcs.solvers.disc_tour import _insert_cheapest
+
+    rng = np.random.default_rng(11)
+    for trial in range(80):
+        m = int(rng.integers(1, 30))
+        pts = rng.uniform(0, 100, (m + 1, 2))
+        ends = np.ascontiguousarray(np.vstack([[50.0, 50.0], [50.0, 50.0]]))
+        discs = np.column_stack([rng.uniform(0, 100, (1, 2)), rng.uniform(0.5, 15, 1)])
+        seq = np.zeros(m + 1, dtype=np.int64)
+        ring = np.vstack([ends[0], pts[:m], ends[1]])
+        costs = []
+        for j in range(m + 1):  # every leg, each place on it sampled densely
+            a, b = ring[j], ring[j + 1]
+            th = np.linspace(0, 2 * np.pi, 2001)
+            rr = discs[0, 2] * np.sqrt(np.linspace(0, 1, 60))[:, None]
+            p = discs[0, :2] + np.stack([rr * np.cos(th), rr * np.sin(th)], axis=-1).reshape(-1, 2)
+            c = np.hypot(*(p - a).T) + np.hypot(*(p - b).T) - np.hypot(*(b - a))
+            costs.append(max(float(c.min()), 0.0))
+        at = _insert_cheapest(seq, pts, discs, ends, m, 0)
+        tour = np.vstack([ends[0], pts[: m + 1], ends[1]])
+        added = float(np.hypot(*np.diff(tour, axis=0).T).sum()) - float(
+            np.hypot(*np.diff(ring, axis=0).T).sum()
+        )
+        assert np.hypot(*(pts[at] - discs[0, :2])) <= discs[0, 2], trial
+        # Dense sampling finds each leg's cost to within a hair above it.
+        assert added <= min(costs) + 1e-9 * 100, (trial, added, min(costs))
+        assert added >= min(costs) - 1e-3, (trial, added, min(costs))

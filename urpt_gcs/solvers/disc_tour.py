@@ -360,6 +360,22 @@ def _exact_run(
 
 
 @nb.njit(cache=True)
+def _nearest_on_segment(
+    cx: float, cy: float, ax: float, ay: float, bx: float, by: float
+) -> tuple[float, float]:
+    dx, dy = bx - ax, by - ay
+    ll = dx * dx + dy * dy
+    t = 0.0 if ll == 0.0 else min(max(((cx - ax) * dx + (cy - ay) * dy) / ll, 0.0), 1.0)
+    return ax + t * dx, ay + t * dy
+
+
+@nb.njit(cache=True)
+def _to_segment(cx: float, cy: float, ax: float, ay: float, bx: float, by: float) -> float:
+    qx, qy = _nearest_on_segment(cx, cy, ax, ay, bx, by)
+    return _dist(cx, cy, qx, qy)
+
+
+@nb.njit(cache=True)
 def _insert_cost(
     pts: FloatArray, ends: FloatArray, discs: FloatArray, d: int, j: int
 ) -> tuple[float, float, float]:
@@ -643,8 +659,21 @@ def _insert_cheapest(
     """Insert disc ``d`` into the tour of the first ``m`` stops at its cheapest place (free
     where a leg already crosses it), shifting the stops after it; its index."""
     cur = pts[:m]
+    cx, cy, r = discs[d, 0], discs[d, 1], discs[d, 2] * (1.0 - _INSIDE)
     best, best_j, best_x, best_y = math.inf, -1, 0.0, 0.0
     for j in range(-1, m):
+        ax, ay = _pt(cur, ends, j)
+        bx, by = _pt(cur, ends, j + 1)
+        leg = _dist(ax, ay, bx, by)
+        near = _to_segment(cx, cy, ax, ay, bx, by)
+        if near <= r:  # the leg crosses the disc: free
+            best, best_j, best_x, best_y = 0.0, j, *_nearest_on_segment(cx, cy, ax, ay, bx, by)
+            break
+        # Every point within h of the leg costs at least sqrt(leg^2 + 4 h^2) - leg (the
+        # ellipse through it with the leg's ends as foci is that wide).
+        h = near - r
+        if math.sqrt(leg * leg + 4.0 * h * h) - leg >= best:
+            continue
         cost, px, py = _insert_cost(cur, ends, discs, d, j)
         if cost < best:
             best, best_j, best_x, best_y = cost, j, px, py
