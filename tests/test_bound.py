@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -261,14 +262,20 @@ def test_bound_closes_on_proven_cetsp_optima(name: str) -> None:
     assert optimum * (1.0 - 1e-4) <= bound.value <= optimum * (1.0 + 1e-4)
 
 
-@pytest.mark.parametrize("sectors", [16, 64, 256])
-def test_star_piece_hulls_hold_their_star(sectors: int) -> None:
+@pytest.mark.parametrize(("sectors", "run"), [(16, 1), (64, 1), (256, 1), (720, 8), (5760, 8)])
+def test_star_piece_hulls_hold_their_star(sectors: int, run: int) -> None:
+    # ``run`` sectors in a row share a reach (a finely walked star repeats each coarse
+    # sector's reach, and the cone caps many sectors at one reach), some of them none.
     from urpt_gcs.solvers.order_bound import star_hull
     from urpt_gcs.solvers.regions import OuterStar
 
     rng = np.random.default_rng(sectors)
-    star = OuterStar((3.0, -2.0), rng.uniform(0.5, 10.0, sectors))
-    for k0, count in ((0, sectors), (sectors - 3, 5), (sectors // 2, 1)):
+    reach = np.repeat(rng.uniform(0.5, 10.0, sectors // run), run)
+    reach[rng.uniform(0, 1, sectors) < 0.03] = 0.0
+    star = OuterStar((3.0, -2.0), reach)
+    for k0, count in ((0, sectors), (sectors - 3, 5), (sectors - 20, 60), (sectors // 2, 1)):
+        if not reach[(k0 + np.arange(count)) % sectors].any():
+            continue
         hull = Polygon(star_hull(star, k0, count))
         k = (k0 + rng.integers(0, count, 4000)) % sectors
         t = 2 * np.pi * (k + rng.uniform(0, 1, k.size)) / sectors
@@ -278,3 +285,38 @@ def test_star_piece_hulls_hold_their_star(sectors: int) -> None:
         )
         x, y = 3.0 + r * np.cos(t), -2.0 + r * np.sin(t)
         assert shapely.covers(hull, shapely.points(x, y)).all()
+
+
+def test_a_finely_walked_star_has_no_more_hull_vertices_than_the_coarse_one() -> None:
+    """A star whose sectors are each split in 8 with the same reach is the same set: its
+    hull keeps the coarse star's vertex count (the search's node solves take time in
+    proportion to it)."""
+    from urpt_gcs.solvers.order_bound import star_hull
+    from urpt_gcs.solvers.regions import OuterStar
+
+    rng = np.random.default_rng(3)
+    coarse = rng.uniform(5.0, 10.0, 720)
+    for k0, count in ((0, 720), (100, 90)):
+        few = star_hull(OuterStar((0.0, 0.0), coarse), k0, count)
+        fine = star_hull(OuterStar((0.0, 0.0), np.repeat(coarse, 8)), 8 * k0, 8 * count)
+        assert len(fine) <= len(few)
+        assert Polygon(fine).area == pytest.approx(Polygon(few).area, rel=1e-9)
+
+
+def test_the_search_stops_once_the_bound_meets_its_shortest_polyline() -> None:
+    """With no tour known to prune by, the search stops when its bound has come within the
+    gap target of the shortest polyline it met that meets every star: the bound can rise no
+    further (it is the least over those polylines and the open nodes)."""
+    from urpt_gcs.solvers.order_bound import order_bound
+    from urpt_gcs.solvers.regions import OuterStar
+
+    rng = np.random.default_rng(12)
+    stars: list[OuterStar | None] = []
+    for x, y in rng.uniform(0, 100, (7, 2)):
+        reach = np.repeat(rng.uniform(4.0, 15.0, 45), 16)  # non-convex stars of 720 sectors
+        stars.append(OuterStar((float(x), float(y)), reach))
+    found = order_bound(stars, None, math.inf, 60.0, gap_target=1e-4)
+    assert found.finished
+    assert found.seconds < 30.0  # without the stop it runs the 60 s out
+    assert found.leaf_xy is not None
+    assert found.leaf_length * (1 - 1e-4) <= found.value <= found.leaf_length

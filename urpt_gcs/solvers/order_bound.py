@@ -68,19 +68,28 @@ def star_hull(star: OuterStar, k0: int, count: int) -> FloatArray:
     """Counter-clockwise vertices of a convex polygon holding the star's sectors
     ``k0 .. k0 + count - 1`` (modulo the sector count) and its centre."""
     n = star.reach_m.size
-    sub = max(1, -(-_SUBARCS // n))
     cx, cy = star.center_xy
-    k = (k0 + np.arange(count)) % n
-    r = star.reach_m[k]
-    k, r = k[r > 0.0], r[r > 0.0]
-    s = np.arange(sub)
-    a = (2.0 * math.pi / n) * (k[:, None] + s[None, :] / sub)
-    b = (2.0 * math.pi / n) * (k[:, None] + (s[None, :] + 1) / sub)
-    rr = np.repeat(r[:, None], sub, axis=1) * (1.0 + 1e-12)
-    tip = rr / math.cos(math.pi / (n * sub))
+    j = k0 + np.arange(count)  # unwrapped: runs do not break where the index wraps
+    r = star.reach_m[j % n]
+    j, r = j[r > 0.0], r[r > 0.0]
+    # Runs of sectors next to each other with one reach are one arc (a finely walked star
+    # repeats each coarse sector's reach), split into sub-arcs no wider than a _SUBARCS-th
+    # of a turn.
+    new = np.ones(len(j), dtype=bool)
+    new[1:] = (np.diff(j) != 1) | (np.diff(r) != 0.0)
+    starts = np.flatnonzero(new)
+    run = np.diff(np.append(starts, len(j)))
+    sub = np.maximum(1, -(-run * _SUBARCS // n))
+    first = np.repeat(j[starts].astype(np.float64), sub)
+    width = np.repeat(run / sub, sub)  # in sectors
+    s = np.arange(int(sub.sum())) - np.repeat(np.cumsum(sub) - sub, sub)
+    a = (2.0 * math.pi / n) * (first + s * width)
+    b = a + (2.0 * math.pi / n) * width
+    rr = np.repeat(r[starts], sub) * (1.0 + 1e-12)
+    tip = rr / np.cos(0.5 * (b - a))
     m = 0.5 * (a + b)
-    ang = np.concatenate([a.ravel(), m.ravel(), b.ravel()])
-    rad = np.concatenate([rr.ravel(), tip.ravel(), rr.ravel()])
+    ang = np.concatenate([a, m, b])
+    rad = np.concatenate([rr, tip, rr])
     pts = np.vstack([[cx, cy], np.column_stack([cx + rad * np.cos(ang), cy + rad * np.sin(ang)])])
     if len(pts) > _QHULL_FROM:
         try:
@@ -570,10 +579,16 @@ def order_bound(
     else:
         heap.append((root.cert, 0, root))
     finished = True
+    solved = False  # the relaxation's optimum reached (to the gap target) with nodes open
     leaf = math.inf
     leaf_node: _Node | None = None
     while heap:
+        # Past the least value of the polylines met that meet every set the bound cannot
+        # rise (it is the least over those and the open nodes): the relaxation is solved.
         if heap[0][0] >= prune_at:
+            break
+        if heap[0][0] >= closed * (1.0 - 0.5 * gap_target):
+            solved = True
             break
         over = max_nodes is not None and nodes >= max_nodes
         if over or time.perf_counter() - started >= time_limit_s or len(heap) >= _MAX_OPEN:
@@ -609,8 +624,9 @@ def order_bound(
     seconds = time.perf_counter() - started
     leaf_xy = None if leaf_node is None else np.column_stack([leaf_node.px, leaf_node.py])
     return OrderBound(
-        max(value, 0.0), nodes, len(heap), finished and not heap, seconds, leaf, leaf_xy
-    )
+        max(value, 0.0), nodes, len(heap), solved or (finished and not heap), seconds, leaf,
+        leaf_xy,
+    )  # fmt: skip
 
 
 # Node solves a dive for a polyline meeting every set may take at most (a dive inserts
