@@ -466,8 +466,8 @@ class Bound:
     n_pieces: int
     seconds: float
     # The order search (:mod:`urpt_gcs.solvers.order_bound`): nodes solved, left open, and
-    # whether it closed every node (then ``value`` is the optimum of the star relaxation,
-    # to the gap target).
+    # whether it finished (then ``value`` is, to the gap target, the optimum of the star
+    # relaxation or the known tour's length).
     order_nodes: int = 0
     order_open: int = 0
     order_finished: bool = False

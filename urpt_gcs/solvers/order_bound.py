@@ -538,9 +538,11 @@ def order_bound(
 
     ``shapes[i]``, where given, is region ``i`` itself (inside its star): its pieces are then
     hulls of the shape, not of the star. The search stops when its bound reaches
-    ``upper * (1 - gap_target)``, when nothing is left open, or at the time limit; the bound
-    holds in every case. ``max_nodes`` also stops it after that many node solves;
-    ``strong`` is how many regions each branching tries."""
+    ``upper * (1 - gap_target)``, when the open nodes reach (to half the gap target) the
+    least value closed -- a polyline met that meets every set, or a pruned node -- past
+    which the bound cannot rise, when nothing is left open, or at the time limit; the bound
+    holds in every case (``finished`` in the first three). ``max_nodes`` also stops it after
+    that many node solves; ``strong`` is how many regions each branching tries."""
     started = time.perf_counter()
     m = len(stars)
     if m <= 1:
@@ -579,16 +581,15 @@ def order_bound(
     else:
         heap.append((root.cert, 0, root))
     finished = True
-    solved = False  # the relaxation's optimum reached (to the gap target) with nodes open
+    done = False  # stopped where searching on cannot raise the bound enough, nodes still open
     leaf = math.inf
     leaf_node: _Node | None = None
     while heap:
-        # Past the least value of the polylines met that meet every set the bound cannot
-        # rise (it is the least over those and the open nodes): the relaxation is solved.
-        if heap[0][0] >= prune_at:
-            break
-        if heap[0][0] >= closed * (1.0 - 0.5 * gap_target):
-            solved = True
+        # The bound is the least of the values closed and the open nodes': once the open
+        # nodes reach the least closed (a polyline met that meets every set: the relaxation
+        # is solved), searching on cannot raise it.
+        if heap[0][0] >= min(prune_at, closed * (1.0 - 0.5 * gap_target)):
+            done = True
             break
         over = max_nodes is not None and nodes >= max_nodes
         if over or time.perf_counter() - started >= time_limit_s or len(heap) >= _MAX_OPEN:
@@ -624,7 +625,7 @@ def order_bound(
     seconds = time.perf_counter() - started
     leaf_xy = None if leaf_node is None else np.column_stack([leaf_node.px, leaf_node.py])
     return OrderBound(
-        max(value, 0.0), nodes, len(heap), solved or (finished and not heap), seconds, leaf,
+        max(value, 0.0), nodes, len(heap), done or (finished and not heap), seconds, leaf,
         leaf_xy,
     )  # fmt: skip
 
