@@ -168,7 +168,7 @@ def naive_length(targets_xy: FloatArray) -> float:
 
 # Seconds per instance for the certified bound, by default, and at most for refinement
 # (which ends on its own well before: its steps are down to a centimetre).
-BOUND_S = 0.5
+BOUND_S = 2.0
 REFINE_S = 30.0
 
 
