@@ -316,7 +316,8 @@ def test_the_search_stops_once_the_bound_meets_its_shortest_polyline() -> None:
         reach = np.repeat(rng.uniform(4.0, 15.0, 45), 16)  # non-convex stars of 720 sectors
         stars.append(OuterStar((float(x), float(y)), reach))
     found = order_bound(stars, None, math.inf, 60.0, gap_target=1e-4)
-    assert found.finished
-    assert found.seconds < 30.0  # without the stop it runs the 60 s out
+    # Finished with nodes still open: stopped by that rule (without it the search runs the
+    # 60 s out, unfinished).
+    assert found.finished and found.open_nodes > 0
     assert found.leaf_xy is not None
     assert found.leaf_length * (1 - 1e-4) <= found.value <= found.leaf_length
