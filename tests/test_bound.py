@@ -321,3 +321,25 @@ def test_the_search_stops_once_the_bound_meets_its_shortest_polyline() -> None:
     assert found.finished and found.open_nodes > 0
     assert found.leaf_xy is not None
     assert found.leaf_length * (1 - 1e-4) <= found.value <= found.leaf_length
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_fewer_vertices_holds_the_polygon_and_moves_it_out_by_at_most_the_tolerance(
+    seed: int,
+) -> None:
+    """A convex polygon of many short edges (a finely walked star's hull) simplified: it
+    holds every point of the original, lies within the tolerance of it, and has fewer
+    vertices."""
+    from urpt_gcs.solvers.order_bound import _hull, fewer_vertices
+
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0, 2 * np.pi, 3000))
+    r = rng.uniform(9.0, 10.0) * (1.0 + 0.002 * rng.standard_normal(t.size))
+    poly = _hull(np.column_stack([r * np.cos(t), r * np.sin(t)]))
+    tol = 10.0 * 10.0 ** -rng.uniform(2.0, 5.0)
+    few = fewer_vertices(poly, tol)
+    assert 3 <= len(few) < len(poly)
+    before, after = Polygon(poly), Polygon(few)
+    assert after.is_valid
+    assert after.buffer(1e-9).covers(before)
+    assert before.hausdorff_distance(after) <= tol * (1.0 + 1e-6) + 1e-9

@@ -38,17 +38,17 @@ BOUND_MAX_REGIONS = 150
 # Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
 _FINE_UP_TO = 24
 _LEAST_SECTORS = 180
-# Tightening the stars where the relaxed tour meets them: the sectors it passes within this
-# share of their reach from the edge are walked again finer, closest to the edge first, as
-# many as fit half the time left (at about this many seconds each).
+# Tightening the stars where the relaxed tour meets them: a star it passes within this share
+# of a sector's reach from the edge is walked again whole, every sector split in two, up to
+# FINER_SPLIT times its first sectors; the stars closest to their edge first, as many as
+# fit half the time left.
 _NEAR_EDGE = 0.2
+# Seconds a wedge's walk takes per band of half a cell (measured on the paper's terrains).
+_BAND_S = 4e-7
 # A relaxed tour meets a star to within this share of its reach (the bound's tolerance).
 _TOUCH = 1e-3
 # ... and this share of a sector's width from its edge counts in the neighbour too.
 _TOUCH_EDGE = 0.05
-_FINER_S = 0.015
-# Sectors on either side of one met near its edge walked again with it.
-_AROUND = 2
 
 # Tighter regions where a relaxed tour meets them, within a time budget (None: nothing left
 # to tighten).
@@ -170,13 +170,15 @@ def certify(
     also_m: float = 0.0,
     area_ratio: float = math.nan,
     tighten: Tighten | None = None,
+    enough: float = PROVEN_GAP,
 ) -> Certificate:
     """The certified lower bound for a flight of ``length_m`` over ``regions``.
 
     ``also_m`` is another valid bound of the same problem (the depot's and the disc-packing
     bounds); the larger of the two is kept, never more than the flight itself. With
-    ``tighten`` (:func:`finer_stars`), while time is left the regions are tightened where
-    the relaxed tour meets them and bounded again.
+    ``tighten`` (:func:`finer_stars`), while time is left and the flight is more than
+    ``enough`` (a share) longer than the bound, the regions are tightened where the relaxed
+    tour meets them and bounded again.
     """
     started = time.perf_counter()
     # The first bound has all the time: the stars are tightened with what it leaves (a
@@ -186,8 +188,8 @@ def certify(
     first = sum(float(np.mean(s.reach_m**2)) for s in regions.outer)
     sectors = int(regions.outer[0].reach_m.size) if regions.outer else 0
     # Where the relaxed tour meets a star near its edge the star may be loose there (a
-    # sector's reach is its widest): walk those sectors again, finer, and bound again.
-    while tighten is not None and poly is not None and (length_m - value) > PROVEN_GAP * value:
+    # sector's reach is its widest): walk those stars again, finer, and bound again.
+    while tighten is not None and poly is not None and (length_m - value) > enough * value:
         left = time_limit_s - (time.perf_counter() - started)
         if left <= 0.0:
             break
@@ -215,24 +217,31 @@ def finer_stars(
     terrain: Terrain, camera: Camera, workers: int | None = 1, hold_m: float = 0.0
 ) -> Tighten:
     """What tightens the outer stars of :func:`outer_regions` (made with the same terrain,
-    camera and ``hold_m``) where a relaxed tour meets them: each sector it passes near the
-    star's edge (within :data:`_NEAR_EDGE` of its reach, and farther out than the star is
-    surely seen) is walked again by :func:`urpt_gcs.visibility.finer_reach`, once. The stars
-    still hold every point that sees their targets."""
-    done: dict[tuple[float, float], np.ndarray] = {}
+    camera and ``hold_m``) where a relaxed tour meets them: each star it passes near the
+    edge (within :data:`_NEAR_EDGE` of a sector's reach, and farther out than the star is
+    surely seen) is walked again whole by :func:`urpt_gcs.visibility.finer_wedges`, every
+    sector split in two, until it has :data:`FINER_SPLIT` times its first sectors. The stars
+    still hold every point that sees their targets.
+
+    Whole stars, not the sectors met: a star walked finer only there keeps its coarse
+    sectors' corners beside them, the next relaxed tour moves onto one, and the order search
+    splits its pieces around every such corner (on paper terrain 8, 8 targets at 40 deg, it
+    closed 125 000 nodes to reach 80.58 m; the same stars walked whole, 11 000 to 81.19 m)."""
+    first: dict[tuple[float, float], int] = {}
+    step = terrain.cell_m / 2.0
 
     def tighten(regions: RegionSet, poly_xy: FloatArray, budget_s: float) -> RegionSet | None:
         stars = regions.outer
         if not stars:
             return None
         poly = np.asarray(poly_xy, dtype=np.float64).reshape(-1, 2)
-        spacing = terrain.cell_m / 2.0
-        samples = points_along(poly, spacing)
+        samples = points_along(poly, step)
         tree = cKDTree(samples)
-        asked: list[tuple[float, int, int]] = []
+        asked: list[tuple[float, int]] = []
         for i, star in enumerate(stars):
             n = star.reach_m.size
-            seen = done.setdefault(star.center_xy, np.zeros(n, dtype=bool))
+            if n >= first.setdefault(star.center_xy, n) * FINER_SPLIT:
+                continue
             c = np.asarray(star.center_xy)
             far = float(star.reach_m.max()) / math.cos(math.pi / n) * (1.0 + _TOUCH)
             near = tree.query_ball_point(c, far)
@@ -255,30 +264,34 @@ def finer_stars(
                 (least <= reach / math.cos(math.pi / n) * (1.0 + _TOUCH))
                 & (least >= (1.0 - _NEAR_EDGE) * reach)
                 & (least > inner)
-                & ~seen
             )
-            # The next relaxed tour will likely meet the star close by: those sectors too.
-            around = np.zeros(n, dtype=bool)
-            for shift in range(-_AROUND, _AROUND + 1):
-                around |= np.roll(pick, shift)
-            for k in np.flatnonzero(around & ~seen).tolist():
-                edge = reach[k] - least[k] if pick[k] else reach[k]
-                asked.append((float(edge), i, k))
+            if pick.any():
+                asked.append((float(np.min(reach[pick] - least[pick])), i))
         if not asked:
             return None
-        asked.sort()
-        asked = asked[: max(int(budget_s / _FINER_S), 1)]
-        which = np.array([a[1] for a in asked])
-        sector = np.array([a[2] for a in asked])
-        xy = np.array([stars[i].center_xy for i in which.tolist()])
+        chosen: list[int] = []
+        cost = 0.0
+        for _, i in sorted(asked):
+            walk = 2.0 * float(stars[i].reach_m.sum()) / step * _BAND_S
+            if chosen and cost + walk > budget_s:
+                break
+            chosen.append(i)
+            cost += walk
+        count = np.array([stars[i].reach_m.size for i in chosen])
+        which = np.repeat(chosen, count)
+        sector = np.concatenate([np.arange(k) for k in count.tolist()])
+        xy = np.array([stars[i].center_xy for i in chosen])[
+            np.repeat(np.arange(len(chosen)), count)
+        ]
         ground = terrain.sample(xy[:, 0], xy[:, 1])
-        count = np.array([stars[i].reach_m.size for i in which.tolist()])
-        got = finer_wedges(terrain, xy, ground, camera, count, sector, workers)
+        got = finer_wedges(
+            terrain, xy, ground, camera, np.repeat(count, count), sector, workers, split=2, bands=1
+        )
         if hold_m > 0.0:
             got = np.maximum(got - hold_m, 0.0)
         new = list(stars)
-        for i in np.unique(which).tolist():
-            new[i] = _finer_star(stars[i], sector[which == i], got[which == i], done)
+        for i in chosen:
+            new[i] = _halved(stars[i], got[which == i])
         stars_t = tuple(new)
         inside = (
             None
@@ -295,35 +308,11 @@ def finer_stars(
     return tighten
 
 
-def _finer_star(
-    star: OuterStar,
-    sector: np.ndarray,
-    wedges: FloatArray,
-    done: dict[tuple[float, float], np.ndarray],
-) -> OuterStar:
-    """The star with ``sector``'s reaches replaced by its wedges' (rows of ``wedges``). The
-    first time, every sector is split into its wedges (the others keep their reach), so the
-    star follows the wedges; after that each sector takes its wedges' greatest reach.
-    ``done`` marks, per star centre, the sectors walked."""
-    n = star.reach_m.size
-    key = star.center_xy
-    if key not in done or (done[key].size == n and not done[key].any()):
-        split = FINER_SPLIT
-        reach = np.repeat(star.reach_m, split)
-        inner = None if star.inner_m is None else np.repeat(star.inner_m, split)
-        fine = (sector[:, None] * split + np.arange(split)[None, :]).ravel()
-        reach[fine] = np.minimum(reach[fine], wedges.ravel())
-        mark = np.zeros(n * split, dtype=bool)
-        mark[fine] = True
-    else:
-        reach = star.reach_m.copy()
-        inner = None if star.inner_m is None else star.inner_m.copy()
-        reach[sector] = np.minimum(reach[sector], wedges.max(axis=1))
-        mark = done[key].copy()
-        mark[sector] = True
-    done[key] = mark
-    if inner is not None:
-        inner = np.minimum(inner, reach)
+def _halved(star: OuterStar, wedges: FloatArray) -> OuterStar:
+    """The star with every sector split in two, each half's reach the least of the sector's
+    and its wedge's (``wedges``: a row of two per sector)."""
+    reach = np.minimum(np.repeat(star.reach_m, 2), wedges.ravel())
+    inner = None if star.inner_m is None else np.minimum(np.repeat(star.inner_m, 2), reach)
     return OuterStar(star.center_xy, reach, inner)
 
 

@@ -463,9 +463,8 @@ def _box_range(z, col0, row0, a, b, d, e, s0, s1, t0, t1, scale):  # type: ignor
     return lo, hi, math.sqrt(gc * gc + gr * gr) * scale
 
 
-# A band whose reach comes within this factor of the sector's reach so far is walked again
-# in this many slices (the reach a band gives is loose by about its slope times its width).
-_FINE_NEAR = 1.05
+# A band that may end the reach is walked again in this many slices (the reach a band
+# gives is loose by about its slope times its width).
 _FINE_SLICES = 16
 
 
@@ -532,9 +531,10 @@ def _sector_reach(z, col0, row0, ground, height, cone, least, a, b, d, e, step, 
             )
         elif s0 < best:
             reach = _band_reach(s0, lo, ground, height)
-            if reach < best * _FINE_NEAR:
+            if _band_reach(s0, hi, ground, height) < best:
                 # A band that may end the reach: its slices, each with its own lowest
-                # ground, from its own start, are tighter.
+                # ground, from its own start, are tighter. (A slice starts at s0 or later
+                # on ground no higher than hi: no slice can end it before this.)
                 reach = min(
                     reach,
                     _fine_reach(z, col0, row0, a, b, d, e, s0, step, t0, t1, scale, ground, height),
@@ -663,28 +663,30 @@ def finer_wedges(
     sectors: npt.ArrayLike,
     sector: npt.ArrayLike,
     workers: int | None = 1,
+    split: int = FINER_SPLIT,
+    bands: int = FINER_BANDS,
 ) -> FloatArray:
     """Sector ``sector[i]`` (of ``sectors[i]``, or of ``sectors``, around target ``i``) split
-    into :data:`FINER_SPLIT` wedges, shape (sectors asked, FINER_SPLIT): each wedge walked as
-    :func:`star_reach` walks a sector, in bands :data:`FINER_BANDS` times narrower, so no
-    point of the wedge farther than its reach sees the target."""
+    into ``split`` wedges, shape (sectors asked, split): each wedge walked as
+    :func:`star_reach` walks a sector, in bands ``bands`` times narrower, so no point of the
+    wedge farther than its reach sees the target."""
     xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
     j = np.asarray(sector, dtype=np.int64).reshape(-1)
     n = len(j)
     if n == 0:
-        return np.zeros((0, FINER_SPLIT))
-    rep = np.repeat(np.arange(n), FINER_SPLIT)
+        return np.zeros((0, split))
+    rep = np.repeat(np.arange(n), split)
     ground = np.ascontiguousarray(np.asarray(ground_m, dtype=np.float64)[rep])
     height = np.ascontiguousarray(camera.altitude_m - ground)
     cone = np.ascontiguousarray(camera.cone_radius_m(ground))
     col0, row0 = terrain.pixel_coords(xy[rep, 0], xy[rep, 1])
     col0, row0 = np.ascontiguousarray(col0), np.ascontiguousarray(row0)
-    part = np.tile(np.arange(FINER_SPLIT), n)
+    part = np.tile(np.arange(split), n)
     width = 2.0 * math.pi / np.broadcast_to(np.asarray(sectors, dtype=np.float64), (n,))[rep]
-    t0 = np.ascontiguousarray(width * (j[rep] + part / FINER_SPLIT))
-    t1 = np.ascontiguousarray(width * (j[rep] + (part + 1) / FINER_SPLIT))
+    t0 = np.ascontiguousarray(width * (j[rep] + part / split))
+    t1 = np.ascontiguousarray(width * (j[rep] + (part + 1) / split))
     inv = ~terrain.transform
-    step = terrain.cell_m / 2.0 / FINER_BANDS
+    step = terrain.cell_m / 2.0 / bands
     outer = np.zeros(len(rep))
 
     def run(lo: int, hi: int) -> None:
@@ -694,5 +696,5 @@ def finer_wedges(
         )  # fmt: skip
 
     _in_threads(run, len(rep), workers, 64, 2)
-    got: FloatArray = outer.reshape(n, FINER_SPLIT)
+    got: FloatArray = outer.reshape(n, split)
     return got

@@ -157,10 +157,18 @@ def bench_cetsp_command(
 @click.option(
     "--bound-time",
     type=click.FloatRange(min=0.0, min_open=True),
-    default=2.0,  # urpt_gcs.bench.paper.BOUND_S (not imported here: the CLI starts light)
+    default=10.0,  # urpt_gcs.bench.paper.BOUND_S (not imported here: the CLI starts light)
     show_default=True,
     help="Seconds the certified lower bound gets per instance (it stops sooner where it "
     "can rise no further).",
+)
+@click.option(
+    "--bound-gap",
+    type=click.FloatRange(min=0.0),
+    default=0.1,  # urpt_gcs.bench.paper.BOUND_GAP, in percent
+    show_default=True,
+    help="Percent: the bound's stars are walked finer only while the tour is more than "
+    "this above the bound.",
 )
 @cluster_options
 def bench_paper_command(
@@ -168,6 +176,7 @@ def bench_paper_command(
     out: Path | None,
     heuristic_time: float,
     bound_time: float,
+    bound_gap: float,
     scheduler: str | None,
     workers: int | None,
 ) -> None:
@@ -183,6 +192,7 @@ def bench_paper_command(
                 progress=terminal_progress(),
                 client=client,
                 bound_s=bound_time,
+                bound_gap=bound_gap / 100.0,
             )
     except UrptError as exc:
         fail(exc)

@@ -51,6 +51,10 @@ I64 = npt.NDArray[np.int64]
 _SUBARCS = 256
 # Hulls of more points than this are Qhull's (scipy), fewer the monotone chain's.
 _QHULL_FROM = 64
+# Such hulls lose short edges where that moves them out by at most this share of the star's
+# widest reach (a finely walked star's hull has hundreds of vertices, and a node's solve
+# takes time in proportion to its sets' vertices).
+_SIMPLIFY = 1e-5
 # Primal-dual iterations per node, and how often the certificate is evaluated.
 _NODE_ITERATIONS = 4000
 _CHECK_EVERY = 25
@@ -97,9 +101,38 @@ def star_hull(star: OuterStar, k0: int, count: int) -> FloatArray:
         except QhullError:
             return _hull(pts)
         # Qhull gives a 2-d hull's vertices counter-clockwise.
-        out: FloatArray = pts[hull.vertices]
-        return out
+        return fewer_vertices(pts[hull.vertices], _SIMPLIFY * float(rr.max()))
     return _hull(pts)
+
+
+def fewer_vertices(poly: FloatArray, tol: float) -> FloatArray:
+    """A convex polygon holding ``poly`` (convex, counter-clockwise) with fewer vertices:
+    an edge is dropped and its neighbours extended to meet where that point lies at most
+    ``tol`` beyond it, so the polygon grows by at most ``tol`` anywhere."""
+    while len(poly) > 3:
+        a = poly
+        b = np.roll(poly, -1, axis=0)  # edge i runs a[i] -> b[i]
+        before = a - np.roll(a, 1, axis=0)  # edge i - 1's direction
+        after = np.roll(b, -1, axis=0) - b  # edge i + 1's direction
+        # The line of edge i - 1 (a + t before) meets that of edge i + 1 (b + s after).
+        den = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+        ab = b - a
+        length = np.hypot(ab[:, 0], ab[:, 1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (ab[:, 0] * after[:, 1] - ab[:, 1] * after[:, 0]) / den
+            w = a + t[:, None] * before
+            # How far w lies beyond edge i (to its right: the polygon runs counter-clockwise).
+            beyond = (ab[:, 0] * (a[:, 1] - w[:, 1]) - ab[:, 1] * (a[:, 0] - w[:, 0])) / length
+        # The neighbours turn left by less than half a turn and meet ahead of a: beyond edge i.
+        ok = (den > 0.0) & (t >= 0.0) & np.isfinite(beyond) & (beyond <= tol)
+        score = np.where(ok, beyond, np.inf)
+        # Edges dropped in one pass are never next to each other.
+        drop = ok & (score < np.roll(score, 1)) & (score <= np.roll(score, -1))
+        if not drop.any():
+            break
+        # Edge i dropped: its ends a[i] and b[i] = a[i + 1] become the one point w[i].
+        poly = np.where(drop[:, None], w, a)[~np.roll(drop, 1)]
+    return np.ascontiguousarray(poly)
 
 
 def _hull(pts: FloatArray) -> FloatArray:
