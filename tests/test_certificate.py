@@ -307,25 +307,34 @@ def test_a_tour_read_off_the_bounds_relaxed_tour(terrain_seed: int, m: int, fov:
     _assert_stops_see(terrain.elevation_m, targets, ground, fov, refined.points_xy, refined.sees)
 
 
+def _paper_stars(seed: int, m: int):  # type: ignore[no-untyped-def]
+    """Paper terrain ``seed``, its ``m`` targets at 40 deg: the terrain, targets, their
+    ground, camera, outer stars with their area ratio, the site and an empty tour."""
+    from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
+    from urpt_gcs.refinement import Site
+    from urpt_gcs.solvers import Tour
+    from urpt_gcs.visibility import Camera
+
+    terrain = tin_terrain(seed)
+    targets = random_targets(seed, m)
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    camera = Camera(ALTITUDE, 40.0)
+    regions, ratio = outer_regions(terrain, targets, ground, camera, None)
+    like = Tour((), 0.0, 0.0, False, "test", 0.0, None, np.zeros((0, m), dtype=bool))
+    site = Site(terrain, targets, ground, camera)
+    return terrain, targets, ground, camera, regions, ratio, site, like
+
+
 def test_whole_stars_walked_finer_bring_the_bound_within_half_a_percent() -> None:
     """Paper terrain 8, 8 targets at 40 deg: the outer stars' half-degree sectors leave the
     bound 1.4 % under a real tour (read off the relaxed tour; every stop seen by brute
     force). Walking the stars the relaxed tour meets again whole, sectors split in two a
     round, brings it within 0.5 % (walking only the sectors met, it stayed above 1 % after
     30 s), and never above the tour."""
-    from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
     from urpt_gcs.certificate import certify, finer_stars
-    from urpt_gcs.refinement import Site, refine_along
-    from urpt_gcs.solvers import Tour
-    from urpt_gcs.visibility import Camera
+    from urpt_gcs.refinement import refine_along
 
-    terrain = tin_terrain(8)
-    targets = random_targets(8, 8)
-    ground = terrain.sample(targets[:, 0], targets[:, 1])
-    camera = Camera(ALTITUDE, 40.0)
-    regions, ratio = outer_regions(terrain, targets, ground, camera, None)
-    like = Tour((), 0.0, 0.0, False, "test", 0.0, None, np.zeros((0, 8), dtype=bool))
-    site = Site(terrain, targets, ground, camera)
+    terrain, targets, ground, camera, regions, ratio, site, like = _paper_stars(8, 8)
     plain = certify(regions, 1e9, 5.0)
     assert plain.relaxed_tour_xy is not None
     read = refine_along(site, plain.relaxed_tour_xy, None, like, 30.0)
@@ -345,22 +354,13 @@ def test_whole_stars_walked_finer_bring_the_bound_within_half_a_percent() -> Non
 
 def test_stars_tightened_where_the_relaxed_tour_meets_them() -> None:
     """Paper terrain 2, 6 targets at 40 deg: the relaxed tour meets a star on a spike that
-    reaches the cone's edge where nothing is seen. Walking the sectors it meets again, finer,
+    reaches the cone's edge where nothing is seen. Walking the stars it meets again, finer,
     raises the bound, which stays below a real tour (read off the polyline, every stop seen
     by brute force)."""
-    from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
     from urpt_gcs.certificate import certify, finer_stars
-    from urpt_gcs.refinement import Site, refine_along
-    from urpt_gcs.solvers import Tour
-    from urpt_gcs.visibility import Camera
+    from urpt_gcs.refinement import refine_along
 
-    terrain = tin_terrain(2)
-    targets = random_targets(2, 6)
-    ground = terrain.sample(targets[:, 0], targets[:, 1])
-    camera = Camera(ALTITUDE, 40.0)
-    regions, ratio = outer_regions(terrain, targets, ground, camera, None)
-    like = Tour((), 0.0, 0.0, False, "test", 0.0, None, np.zeros((0, 6), dtype=bool))
-    site = Site(terrain, targets, ground, camera)
+    terrain, targets, ground, camera, regions, ratio, site, like = _paper_stars(2, 6)
     # A real tour's length lets the search finish; the stars are tightened in the time left.
     plain = certify(regions, 1e9, 1.0)
     assert plain.relaxed_tour_xy is not None
