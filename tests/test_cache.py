@@ -64,6 +64,22 @@ def test_the_cache_key_is_the_source_not_the_checkouts_path(
     assert here[2] == there[2]
 
 
+def test_a_change_to_another_module_compiles_the_kernel_again(
+    fresh_env: dict[str, str], tmp_path: Path
+) -> None:
+    """A kernel compiles in the kernels it calls from other modules: a cache keyed by its own
+    module's source alone would run the old code of a changed callee."""
+    package = Path(cache.__file__).parent
+    clone = tmp_path / "changed"
+    shutil.copytree(package, clone / "urpt_gcs", ignore=shutil.ignore_patterns("__pycache__"))
+    callee = clone / "urpt_gcs" / "solvers" / "refine.py"
+    callee.write_text(callee.read_text() + "\n# changed\n")
+    here = _probe(fresh_env, tmp_path)
+    there = _probe({**fresh_env, "PYTHONPATH": str(clone)}, tmp_path)
+    assert Path(there[3]).is_relative_to(clone), "the copy was not the one imported"
+    assert here[2] != there[2]
+
+
 def test_a_users_numba_cache_dir_is_kept(fresh_env: dict[str, str], tmp_path: Path) -> None:
     mine = tmp_path / "mine"
     cache_dir, _, path, _ = _probe({**fresh_env, "NUMBA_CACHE_DIR": str(mine)}, tmp_path)

@@ -298,3 +298,39 @@ def test_cheapest_insertion_matches_a_scan_of_every_leg() -> None:
         # Dense sampling finds each leg's cost to within a hair above it.
         assert added <= min(costs) + 1e-9 * 100, (trial, added, min(costs))
         assert added >= min(costs) - 1e-3, (trial, added, min(costs))
+
+
+def test_best_point_on_a_disc_from_ends_beside_its_rim() -> None:
+    # Stops of overlapping discs sit on or a hair outside a neighbour's rim: the best point
+    # must still be the least over the whole circle (dense), and inside the disc.
+    rng = np.random.default_rng(12)
+    th = np.linspace(-np.pi, np.pi, 200_001)
+    for trial in range(60):
+        c, r = rng.uniform(-5, 5, 2), rng.uniform(0.1, 3.0)
+        ends = []
+        for _ in range(2):
+            phi = rng.uniform(-np.pi, np.pi)
+            out = r * (1.0 + 10.0 ** rng.uniform(-15, 0))
+            ends.append(c + out * np.array([np.cos(phi), np.sin(phi)]))
+        a, b = ends
+        p = np.asarray(best_on_disc(*a, *b, *c, r))
+        ring = c + r * np.column_stack([np.cos(th), np.sin(th)])
+        dense = np.min(np.hypot(*(ring - a).T) + np.hypot(*(ring - b).T))
+        got = np.hypot(*(p - a)) + np.hypot(*(p - b))
+        assert np.hypot(*(p - c)) <= r * (1 + 1e-12), trial
+        assert got <= dense + 1e-9 * r, (trial, got, dense)
+
+
+def test_the_insertion_floor_never_exceeds_the_insertion_cost() -> None:
+    # Moves are skipped on this floor: above the real cost it would skip improving moves.
+    from urpt_gcs.solvers.disc_tour import _insert_cost, _insert_floor
+
+    rng = np.random.default_rng(13)
+    for trial in range(400):
+        m = int(rng.integers(1, 8))
+        pts = rng.uniform(0, 100, (m, 2))
+        ends = np.ascontiguousarray(rng.uniform(0, 100, (2, 2)))
+        discs = np.column_stack([rng.uniform(0, 100, (1, 2)), rng.uniform(0.0, 30, 1)])
+        for j in range(-1, m):
+            cost = _insert_cost(pts, ends, discs, 0, j)[0]
+            assert _insert_floor(pts, ends, discs, 0, j) <= cost + 1e-9, (trial, j)

@@ -37,9 +37,11 @@ WINDOW = 30
 # Share of the kicks that take a disc and its neighbours out and put them back greedily
 # (the others are double bridges).
 _RUIN_SHARE = 0.5
-# Share of the kicks after which the search also runs on the stops alone, the discs their
-# legs cross anyway taken out and put back after.
+# Share of the batches of kicks after which the search also runs on the stops alone, the
+# discs their legs cross anyway taken out and put back after.
 _STRIP_SHARE = 0.3
+# Seconds a batch of kicks should take (the time limit is checked between batches).
+_BATCH_S = 0.05
 # Stops kept this far (relative to the radius) inside their disc.
 _INSIDE = 1e-9
 # Newton steps per barrier stage within the search (the exact positions of a whole tour
@@ -388,6 +390,20 @@ def _insert_cost(
 
 
 @nb.njit(cache=True)
+def _insert_floor(pts: FloatArray, ends: FloatArray, discs: FloatArray, d: int, j: int) -> float:
+    """A lower bound on :func:`_insert_cost`, cheaply: every point ``h`` from the leg
+    ``j -> j + 1`` costs at least ``sqrt(leg^2 + 4 h^2) - leg`` (the ellipse through it with
+    the leg's ends as foci is that wide)."""
+    ax, ay = _pt(pts, ends, j)
+    bx, by = _pt(pts, ends, j + 1)
+    h = _to_segment(discs[d, 0], discs[d, 1], ax, ay, bx, by) - discs[d, 2]
+    if h <= 0.0:
+        return 0.0
+    leg = _dist(ax, ay, bx, by)
+    return math.sqrt(leg * leg + 4.0 * h * h) - leg
+
+
+@nb.njit(cache=True)
 def _move_stop(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> int:
     """Move the stop at ``i`` to just after position ``j`` (positions before the move); its
     new position."""
@@ -535,14 +551,32 @@ def _descend(
     """Relocate, Or-opt and 2-opt moves until none gains, starting from the discs at
     positions ``lo..hi`` and then those around each change; the first and last positions
     changed (``n, -1`` when none)."""
-    n = seq.size
     tol = _MIN_GAIN * path_length(pts, ends)
-    first, last = n, -1
     # Indexed by disc: the tour may hold only some of them (the others stripped).
     active = np.zeros(pos.size, dtype=np.bool_)
     queue = np.empty(pos.size, dtype=np.int64)
+    size = _wake(seq, active, queue, 0, 0, lo, hi)
+    return _search(seq, pts, pos, discs, ends, neigh, active, queue, size, tol)
+
+
+@nb.njit(cache=True)
+def _search(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    active: BoolArray,
+    queue: IntArray,
+    size: int,
+    tol: float,
+) -> tuple[int, int]:
+    """The moves of :func:`_descend` from the discs ``queue[:size]`` (marked ``active``),
+    each gaining more than ``tol``; ``active`` is left all False."""
+    n = seq.size
+    first, last = n, -1
     head = 0
-    size = _wake(seq, active, queue, head, 0, lo, hi)
     budget = 200 * n
     while size > 0 and budget > 0:
         budget -= 1
@@ -567,6 +601,8 @@ def _descend(
                 for j in (pos[m] - 1, pos[m]):
                     # The slots either side of the stop itself are where it is now.
                     if j == i or j == i - 1:
+                        continue
+                    if _insert_floor(pts, ends, discs, d, j) - gain >= best:
                         continue
                     cost, px, py = _insert_cost(pts, ends, discs, d, j)
                     delta = cost - gain
@@ -629,6 +665,10 @@ def _descend(
                     size = _wake(seq, active, queue, head, size, hi2 - 1, hi2 + 2)
                     done = True
                     break
+    while size > 0:  # out of budget: the rest unmarked
+        active[queue[head]] = False
+        head = (head + 1) % queue.size
+        size -= 1
     return first, last
 
 
@@ -688,36 +728,70 @@ def _insert_cheapest(
 
 
 @nb.njit(cache=True)
+def _insert_near(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    m: int,
+    d: int,
+) -> None:
+    """Insert disc ``d`` into the tour of the first ``m`` stops at the cheapest place next to
+    one of its neighbours in the tour (free where that leg crosses it; anywhere when none of
+    them is in the tour), shifting the stops after it."""
+    best, best_j, best_x, best_y = math.inf, -2, 0.0, 0.0
+    for q in range(neigh.shape[1]):
+        at = pos[neigh[d, q]]
+        if at < 0:
+            continue
+        for j in (at - 1, at):
+            if _insert_floor(pts[:m], ends, discs, d, j) >= best:
+                continue
+            cost, px, py = _insert_cost(pts[:m], ends, discs, d, j)
+            if cost < best:
+                best, best_j, best_x, best_y = cost, j, px, py
+    if best_j == -2:
+        _insert_cheapest(seq, pts, discs, ends, m, d)
+    else:
+        for k in range(m, best_j + 1, -1):
+            seq[k] = seq[k - 1]
+            pts[k, 0] = pts[k - 1, 0]
+            pts[k, 1] = pts[k - 1, 1]
+        seq[best_j + 1] = d
+        pts[best_j + 1, 0] = best_x
+        pts[best_j + 1, 1] = best_y
+    for k in range(m + 1):
+        pos[seq[k]] = k
+
+
+@nb.njit(cache=True)
 def _ruin(
     seq: IntArray,
     pts: FloatArray,
     pos: IntArray,
     discs: FloatArray,
     ends: FloatArray,
+    neigh: IntArray,
     removed: IntArray,
-) -> tuple[int, int]:
+) -> None:
     """Take the discs ``removed`` out of the tour and put each back (in the order given) at
-    its cheapest place, its point the best there; the first and last positions changed."""
+    the cheapest place next to its neighbours, its point the best there."""
     n = seq.size
-    out = np.zeros(n, dtype=np.bool_)
     for d in removed:
-        out[d] = True
+        pos[d] = -1
     m = 0
     for k in range(n):
-        if not out[seq[k]]:
+        if pos[seq[k]] >= 0:
             seq[m] = seq[k]
             pts[m, 0] = pts[k, 0]
             pts[m, 1] = pts[k, 1]
+            pos[seq[m]] = m
             m += 1
-    first, last = n, -1
     for d in removed:
-        at = _insert_cheapest(seq, pts, discs, ends, m, d)
+        _insert_near(seq, pts, pos, discs, ends, neigh, m, d)
         m += 1
-        first = min(first, at)
-        last = max(last, at)
-    for k in range(n):
-        pos[seq[k]] = k
-    return first, last
 
 
 @nb.njit(cache=True)
@@ -797,6 +871,67 @@ def _among(discs: FloatArray, kept: IntArray, k: int = NEIGHBOURS) -> IntArray:
     return out
 
 
+@nb.njit(cache=True)
+def _kicks(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    best_seq: IntArray,
+    best_pts: FloatArray,
+    count: int,
+    rng: np.random.Generator,
+) -> float:
+    """``count`` kicks, each followed by a descent from the stops it changed; a tour no
+    longer than the best is kept as the best (ties too: they let the search drift across
+    plateaus), a longer one undone. ``seq, pts`` start and end as ``best_seq, best_pts``;
+    the best length."""
+    n = seq.size
+    best_len = path_length(best_pts, ends)
+    tol = _MIN_GAIN * best_len
+    active = np.zeros(pos.size, dtype=np.bool_)
+    queue = np.empty(pos.size, dtype=np.int64)
+    window = min(n, WINDOW)
+    k_max = neigh.shape[1]
+    for _ in range(count):
+        size = 0
+        if rng.random() < _RUIN_SHARE:
+            # A disc and some of its nearest taken out and put back greedily.
+            centre = seq[rng.integers(0, n)]
+            k = rng.integers(2, k_max + 1)
+            removed = np.empty(k + 1, dtype=np.int64)
+            removed[:k] = neigh[centre, :k]
+            removed[k] = centre
+            rng.shuffle(removed)
+            _ruin(seq, pts, pos, discs, ends, neigh, removed)
+            for d in removed:
+                size = _wake(seq, active, queue, 0, size, pos[d] - 1, pos[d] + 1)
+        else:
+            # A double bridge within a window: two runs of stops swap places.
+            start = rng.integers(0, n - window + 1)
+            cut = rng.permutation(window)[:3]
+            cut.sort()
+            a, b, c = cut[0] + start + 1, cut[1] + start + 1, cut[2] + start + 1
+            _kick(seq, pts, pos, a, b, c)
+            for at in (a, a + c - b, c):
+                _settle(seq, pts, discs, ends, at - 2, at + 1)
+                size = _wake(seq, active, queue, 0, size, at - 2, at + 1)
+        _search(seq, pts, pos, discs, ends, neigh, active, queue, size, tol)
+        length = path_length(pts, ends)
+        if length <= best_len * (1.0 + 1e-12):
+            best_len = min(length, best_len)
+            best_seq[:] = seq
+            best_pts[:] = pts
+        else:
+            seq[:] = best_seq
+            pts[:] = best_pts
+            for k in range(n):
+                pos[seq[k]] = k
+    return best_len
+
+
 def improve(
     seq: IntArray,
     pts: FloatArray,
@@ -832,37 +967,38 @@ def improve(
     best_seq, best_pts = seq.copy(), pts.copy()
     best_len = path_length(pts, ends)
     rng = np.random.default_rng(seed)
-    window = min(n, WINDOW)
+    # Kicks run in batches sized to take about _BATCH_S each, so the time limit holds.
+    count = 16
     while n >= 4 and time.perf_counter() - started < time_limit_s:
-        if rng.random() < _RUIN_SHARE:
-            centre = int(rng.integers(n))
-            k = int(rng.integers(2, neigh.shape[1] + 1))
-            removed = rng.permutation(np.append(neigh[centre, :k], centre))
-            lo, hi = _ruin(seq, pts, pos, discs, ends, removed)
-            _descent(seq, pts, pos, discs, ends, neigh, lo - 10, hi + 10)
-        else:
-            start = int(rng.integers(0, n - window + 1))
-            a, b, c = np.sort(rng.choice(window, 3, replace=False)) + start + 1
-            _kick(seq, pts, pos, int(a), int(b), int(c))
-            _descent(seq, pts, pos, discs, ends, neigh, a - 10, c + 10)
+        tick = time.perf_counter()
+        best_len = _kicks(seq, pts, pos, discs, ends, neigh, best_seq, best_pts, count, rng)
+        took = time.perf_counter() - tick
+        left = time_limit_s - (time.perf_counter() - started)
+        count = int(np.clip(count * min(_BATCH_S, max(left, 0.0)) / max(took, 1e-6), 1, 4 * count))
         if rng.random() < _STRIP_SHARE:
-            # Search over the stops that matter, then put the others back.
-            tol = _MIN_GAIN * path_length(pts, ends)
-            m, taken = _strip(seq, pts, pos, ends, tol)
+            # Search over the stops that matter (kicks too), then put the others back.
+            m, taken = _strip(seq, pts, pos, ends, _MIN_GAIN * best_len)
             if m >= 4:
-                _descend(seq[:m], pts[:m], pos, discs, ends, _among(discs, seq[:m]), 0, m - 1)
+                kept = seq[:m]
+                near = _among(discs, kept)
+                _descend(kept, pts[:m], pos, discs, ends, near, 0, m - 1)
+                if m > WINDOW:
+                    sub_seq, sub_pts = kept.copy(), pts[:m].copy()
+                    _kicks(kept, pts[:m], pos, discs, ends, near, sub_seq, sub_pts, count, rng)
             _put_back(seq, pts, pos, discs, ends, m, taken)
-            _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
-        length = path_length(pts, ends)
-        # Ties are taken too: they let the search drift across plateaus.
-        if length <= best_len * (1.0 + 1e-12):
-            best_len = min(length, best_len)
-            best_seq[:] = seq
-            best_pts[:] = pts
-        else:
-            seq[:] = best_seq
-            pts[:] = best_pts
-            pos[seq] = np.arange(n)
+            _descend(seq, pts, pos, discs, ends, neigh, 0, n - 1)
+            length = path_length(pts, ends)
+            if length <= best_len * (1.0 + 1e-12):
+                best_len = min(length, best_len)
+                best_seq[:] = seq
+                best_pts[:] = pts
+            else:
+                seq[:] = best_seq
+                pts[:] = best_pts
+                pos[seq] = np.arange(n)
+    exact = exact_positions(best_seq, best_pts, discs, depot)
+    if path_length(exact, ends) < best_len:
+        best_pts, best_len = exact, path_length(exact, ends)
     if best_len >= start_len:
         return ids[start_seq], start_pts
     return ids[best_seq], best_pts

@@ -37,6 +37,26 @@ def _legs(ax: float, ay: float, px: float, py: float, bx: float, by: float) -> f
 
 
 @nb.njit(cache=True)
+def _slope(
+    ax: float, ay: float, bx: float, by: float, cx: float, cy: float, r: float, th: float
+) -> tuple[float, float]:
+    """First and second derivative of ``|a - p| + |p - b|`` in ``th``, ``p`` at angle ``th``
+    on the circle ``(c, r)`` (``a`` and ``b`` off it)."""
+    cos, sin = math.cos(th), math.sin(th)
+    ux, uy = cx + r * cos - ax, cy + r * sin - ay
+    vx, vy = cx + r * cos - bx, cy + r * sin - by
+    tx, ty = -r * sin, r * cos
+    # (Positive: at an end of the arc a stop can sit on a or b to rounding.)
+    gu, gv = max(math.hypot(ux, uy), 1e-300), max(math.hypot(vx, vy), 1e-300)
+    du = (ux * tx + uy * ty) / gu
+    dv = (vx * tx + vy * ty) / gv
+    # p'' = -(p - c): (|p'|^2 + (p - a) . p'') / g - g'^2 / g for each leg.
+    ddu = (r * r - r * (ux * cos + uy * sin)) / gu - du * du / gu
+    ddv = (r * r - r * (vx * cos + vy * sin)) / gv - dv * dv / gv
+    return du + dv, ddu + ddv
+
+
+@nb.njit(cache=True)
 def best_on_disc(
     ax: float, ay: float, bx: float, by: float, cx: float, cy: float, r: float
 ) -> tuple[float, float]:
@@ -48,37 +68,42 @@ def best_on_disc(
     qx, qy = ax + t * dx, ay + t * dy
     if math.hypot(qx - cx, qy - cy) <= r:
         return qx, qy
-    # The optimum is on the circle, on the arc between the directions to a and to b.
+    # The optimum is on the circle, on the arc between the directions to a and to b (both
+    # outside the disc here); Newton's method on the slope, kept inside a shrinking bracket.
     ta = math.atan2(ay - cy, ax - cx)
     tb = math.atan2(by - cy, bx - cx)
     span = (tb - ta + math.pi) % (2.0 * math.pi) - math.pi
     lo, hi = ta, ta + span
     if hi < lo:
         lo, hi = hi, lo
-    n = 16
-    best_k, best_v = 0, math.inf
-    for k in range(n + 1):
-        th = lo + (hi - lo) * k / n
-        v = _legs(ax, ay, cx + r * math.cos(th), cy + r * math.sin(th), bx, by)
-        if v < best_v:
-            best_k, best_v = k, v
-    a = lo + (hi - lo) * max(best_k - 1, 0) / n
-    b = lo + (hi - lo) * min(best_k + 1, n) / n
-    g = 0.5 * (math.sqrt(5.0) - 1.0)
-    x1 = b - g * (b - a)
-    x2 = a + g * (b - a)
-    f1 = _legs(ax, ay, cx + r * math.cos(x1), cy + r * math.sin(x1), bx, by)
-    f2 = _legs(ax, ay, cx + r * math.cos(x2), cy + r * math.sin(x2), bx, by)
-    for _ in range(60):
-        if f1 < f2:
-            b, x2, f2 = x2, x1, f1
-            x1 = b - g * (b - a)
-            f1 = _legs(ax, ay, cx + r * math.cos(x1), cy + r * math.sin(x1), bx, by)
+    if _slope(ax, ay, bx, by, cx, cy, r, lo)[0] >= 0.0 or (
+        _slope(ax, ay, bx, by, cx, cy, r, hi)[0] <= 0.0
+    ):
+        f_lo = _legs(ax, ay, cx + r * math.cos(lo), cy + r * math.sin(lo), bx, by)
+        f_hi = _legs(ax, ay, cx + r * math.cos(hi), cy + r * math.sin(hi), bx, by)
+        th = lo if f_lo <= f_hi else hi
+        return cx + r * math.cos(th), cy + r * math.sin(th)
+    # From the bisector of the directions to a and to b (the answer when both are as far).
+    ua, ub = math.hypot(ax - cx, ay - cy), math.hypot(bx - cx, by - cy)
+    th = math.atan2((ay - cy) / ua + (by - cy) / ub, (ax - cx) / ua + (bx - cx) / ub)
+    th += 2.0 * math.pi * round((0.5 * (lo + hi) - th) / (2.0 * math.pi))
+    if not lo < th < hi:
+        th = 0.5 * (lo + hi)
+    for _ in range(100):
+        g, h = _slope(ax, ay, bx, by, cx, cy, r, th)
+        if g > 0.0:
+            hi = th
+        elif g < 0.0:
+            lo = th
         else:
-            a, x1, f1 = x1, x2, f2
-            x2 = a + g * (b - a)
-            f2 = _legs(ax, ay, cx + r * math.cos(x2), cy + r * math.sin(x2), bx, by)
-    th = 0.5 * (a + b)
+            break
+        new = th - g / h if h > 0.0 else 0.5 * (lo + hi)
+        if not lo < new < hi:
+            new = 0.5 * (lo + hi)
+        done = abs(new - th) <= 1e-14 * (1.0 + abs(th))
+        th = new
+        if done:
+            break
     return cx + r * math.cos(th), cy + r * math.sin(th)
 
 
