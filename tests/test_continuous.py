@@ -211,6 +211,33 @@ def test_order_search_touches_every_disc_and_never_lengthens() -> None:
     assert length < closed_length(start, tuple(depot)) * 0.5  # random orders are long
 
 
+def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
+    # The kick loop also runs on a tour of some of the discs (the others taken out, their
+    # position -1): it must neither put one of those in nor lose one of its own.
+    from urpt_gcs.solvers.disc_tour import _among, _kicks, path_length
+
+    rng = np.random.default_rng(14)
+    n = 300
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(1, 6, n)])
+    ends = np.ascontiguousarray(np.array([[50.0, 50.0], [50.0, 50.0]]))
+    kept = np.sort(rng.choice(n, 120, replace=False))
+    seq = rng.permutation(kept)
+    pts = discs[seq, :2].copy()
+    pos = np.full(n, -1, dtype=np.int64)
+    pos[seq] = np.arange(seq.size)
+    start = path_length(pts, ends)
+    best_seq, best_pts = seq.copy(), pts.copy()
+    got = _kicks(seq, pts, pos, discs, ends, _among(discs, seq), best_seq, best_pts, 3000, rng)
+    assert sorted(best_seq.tolist()) == kept.tolist()
+    assert (pos[np.setdiff1d(np.arange(n), kept)] == -1).all()
+    assert (pos[best_seq] == np.arange(seq.size)).all()
+    assert (seq == best_seq).all() and (pts == best_pts).all()
+    inside = np.hypot(*(best_pts - discs[best_seq, :2]).T) <= discs[best_seq, 2]
+    assert inside.all()
+    assert got == pytest.approx(path_length(best_pts, ends), rel=1e-12)
+    assert got < 0.5 * start  # a random order through the centres is long
+
+
 @needs_shared("bench/cetsp")
 @pytest.mark.parametrize("name", ["concentricCircles1", "rotatingDiamonds1", "bubbles1"])
 def test_proven_optima_are_matched(name: str) -> None:

@@ -11,9 +11,11 @@ stops" need no special case.
   ``n``. Per-stop moves alone stall where consecutive stops coincide (overlapping discs
   entered at one point); a joint step does not.
 - :func:`improve`: iterated local search over the continuous tour: relocate a disc next to a
-  neighbour (its point re-optimised there) and 2-opt, each followed by re-settling the stops
-  around the change; random local double bridges between descents; the exact positions for
-  the best tour found.
+  neighbour (its point re-optimised there), Or-opt and 2-opt, each followed by re-settling
+  the stops around the change. Kicks (a local double bridge, or a disc and its nearest taken
+  out and put back greedily) run in one compiled loop, each followed by a descent from the
+  stops it changed; now and then the same search runs on the stops alone (the discs their
+  legs cross anyway taken out and put back after). The exact positions for the best tour.
 """
 
 from __future__ import annotations
@@ -693,6 +695,19 @@ def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int)
 
 
 @nb.njit(cache=True)
+def _put_at(seq: IntArray, pts: FloatArray, m: int, at: int, d: int, x: float, y: float) -> None:
+    """Disc ``d`` at position ``at`` of the tour of the first ``m`` stops, point ``(x, y)``;
+    the stops from ``at`` on shift one along."""
+    for k in range(m, at, -1):
+        seq[k] = seq[k - 1]
+        pts[k, 0] = pts[k - 1, 0]
+        pts[k, 1] = pts[k - 1, 1]
+    seq[at] = d
+    pts[at, 0] = x
+    pts[at, 1] = y
+
+
+@nb.njit(cache=True)
 def _insert_cheapest(
     seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, m: int, d: int
 ) -> int:
@@ -717,13 +732,7 @@ def _insert_cheapest(
         cost, px, py = _insert_cost(cur, ends, discs, d, j)
         if cost < best:
             best, best_j, best_x, best_y = cost, j, px, py
-    for k in range(m, best_j + 1, -1):
-        seq[k] = seq[k - 1]
-        pts[k, 0] = pts[k - 1, 0]
-        pts[k, 1] = pts[k - 1, 1]
-    seq[best_j + 1] = d
-    pts[best_j + 1, 0] = best_x
-    pts[best_j + 1, 1] = best_y
+    _put_at(seq, pts, m, best_j + 1, d, best_x, best_y)
     return best_j + 1
 
 
@@ -755,13 +764,7 @@ def _insert_near(
     if best_j == -2:
         _insert_cheapest(seq, pts, discs, ends, m, d)
     else:
-        for k in range(m, best_j + 1, -1):
-            seq[k] = seq[k - 1]
-            pts[k, 0] = pts[k - 1, 0]
-            pts[k, 1] = pts[k - 1, 1]
-        seq[best_j + 1] = d
-        pts[best_j + 1, 0] = best_x
-        pts[best_j + 1, 1] = best_y
+        _put_at(seq, pts, m, best_j + 1, d, best_x, best_y)
     for k in range(m + 1):
         pos[seq[k]] = k
 
