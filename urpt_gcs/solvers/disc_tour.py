@@ -887,9 +887,8 @@ def _kicks(
     count: int,
     rng: np.random.Generator,
 ) -> float:
-    """``count`` kicks, each followed by a descent from the stops it changed; a tour no
-    longer than the best is kept as the best (ties too: they let the search drift across
-    plateaus), a longer one undone. ``seq, pts`` start and end as ``best_seq, best_pts``;
+    """``count`` kicks, each followed by a descent from the stops it changed and kept or
+    undone (:func:`_keep_or_undo`). ``seq, pts`` start and end as ``best_seq, best_pts``;
     the best length."""
     n = seq.size
     best_len = path_length(best_pts, ends)
@@ -922,16 +921,31 @@ def _kicks(
                 _settle(seq, pts, discs, ends, at - 2, at + 1)
                 size = _wake(seq, active, queue, 0, size, at - 2, at + 1)
         _search(seq, pts, pos, discs, ends, neigh, active, queue, size, tol)
-        length = path_length(pts, ends)
-        if length <= best_len * (1.0 + 1e-12):
-            best_len = min(length, best_len)
-            best_seq[:] = seq
-            best_pts[:] = pts
-        else:
-            seq[:] = best_seq
-            pts[:] = best_pts
-            for k in range(n):
-                pos[seq[k]] = k
+        best_len = _keep_or_undo(seq, pts, pos, ends, best_seq, best_pts, best_len)
+    return best_len
+
+
+@nb.njit(cache=True)
+def _keep_or_undo(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    ends: FloatArray,
+    best_seq: IntArray,
+    best_pts: FloatArray,
+    best_len: float,
+) -> float:
+    """The tour ``seq, pts`` kept as the best if no longer (ties too: they let the search
+    drift across plateaus), else undone back to the best; the best length."""
+    length = path_length(pts, ends)
+    if length <= best_len * (1.0 + 1e-12):
+        best_seq[:] = seq
+        best_pts[:] = pts
+        return min(length, best_len)
+    seq[:] = best_seq
+    pts[:] = best_pts
+    for k in range(seq.size):
+        pos[seq[k]] = k
     return best_len
 
 
@@ -990,15 +1004,7 @@ def improve(
                     _kicks(kept, pts[:m], pos, discs, ends, near, sub_seq, sub_pts, count, rng)
             _put_back(seq, pts, pos, discs, ends, m, taken)
             _descend(seq, pts, pos, discs, ends, neigh, 0, n - 1)
-            length = path_length(pts, ends)
-            if length <= best_len * (1.0 + 1e-12):
-                best_len = min(length, best_len)
-                best_seq[:] = seq
-                best_pts[:] = pts
-            else:
-                seq[:] = best_seq
-                pts[:] = best_pts
-                pos[seq] = np.arange(n)
+            best_len = _keep_or_undo(seq, pts, pos, ends, best_seq, best_pts, best_len)
     exact = exact_positions(best_seq, best_pts, discs, depot)
     if path_length(exact, ends) < best_len:
         best_pts, best_len = exact, path_length(exact, ends)
