@@ -122,6 +122,30 @@ def test_bench_cetsp_writes_the_columns(tmp_path) -> None:  # type: ignore[no-un
     assert float(rows[0]["best_known"]) == 34.0
 
 
+def test_bench_cetsp_runs_only_the_sizes_asked_for(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    (tmp_path / "instances").mkdir()
+    for name, k in (("three", 3), ("four", 4), ("six", 6)):
+        rows = "".join(f"{10 * np.cos(a):.4f} {10 * np.sin(a):.4f} 1\n" for a in range(k))
+        (tmp_path / "instances" / f"{name}.txt").write_text(f"# {name} depot=0,0\n{rows}")
+    out = tmp_path / "out"
+    args = ["bench", "cetsp", str(tmp_path), "--time-limit", "0.5", "--out", str(out)]
+    result = CliRunner().invoke(main, [*args, "--min-discs", "4", "--max-discs", "5"])
+    assert result.exit_code == 0, result.output
+    with (out / "results.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["instance"], r["n_discs"]) for r in rows] == [("four", "4")]
+
+    # A range no instance falls in: one line naming the options and the sizes there are,
+    # and no results written.
+    empty = tmp_path / "empty"
+    result = CliRunner().invoke(
+        main, ["bench", "cetsp", str(tmp_path), "--min-discs", "7", "--out", str(empty)]
+    )
+    assert result.exit_code == 1
+    assert "--min-discs/--max-discs" in result.output and "3 to 6" in result.output
+    assert "Traceback" not in result.output and not empty.exists()
+
+
 def test_bench_cetsp_refuses_a_folder_without_instances(tmp_path) -> None:  # type: ignore[no-untyped-def]
     result = CliRunner().invoke(main, ["bench", "cetsp", str(tmp_path)])
     assert result.exit_code == 1

@@ -122,13 +122,20 @@ def read_published(directory: Path) -> dict[str, Published]:
     return out
 
 
-def instance_paths(directory: Path, only: Sequence[str] | None = None) -> list[Path]:
-    """The instance files of ``directory`` (``instances/*.txt``), by size then name.
+def instance_paths(
+    directory: Path,
+    only: Sequence[str] | None = None,
+    min_discs: int | None = None,
+    max_discs: int | None = None,
+) -> list[Path]:
+    """The instance files of ``directory`` (``instances/*.txt``), by size then name; only
+    those with ``min_discs`` to ``max_discs`` discs where those are given.
 
     Raises
     ------
     SettingsError
-        When the folder has no instances, or ``only`` names one it does not hold.
+        When the folder has no instances, ``only`` names one it does not hold, or none has
+        a number of discs in the range.
     """
     folder = directory / "instances"
     if not folder.is_dir():
@@ -150,7 +157,17 @@ def instance_paths(directory: Path, only: Sequence[str] | None = None) -> list[P
         with p.open(encoding="utf-8") as f:
             return sum(1 for line in f if line.strip() and not line.startswith("#")), p.stem
 
-    return sorted(chosen, key=size)
+    lo = 0 if min_discs is None else min_discs
+    hi = math.inf if max_discs is None else max_discs
+    sized = sorted((size(p), p) for p in chosen)
+    kept = [p for (n, _), p in sized if lo <= n <= hi]
+    if not kept:
+        wanted = f"at least {lo}" if max_discs is None else f"{lo} to {max_discs}"
+        raise SettingsError(
+            f"--min-discs/--max-discs: no instance of {folder} has {wanted} discs (they "
+            f"have {sized[0][0][0]} to {sized[-1][0][0]}); widen the range"
+        )
+    return kept
 
 
 def instance_job(job: tuple[Path, Published], settings: SolveSettings) -> Row:
@@ -181,8 +198,11 @@ def run_cetsp(
     progress: Callable[[str], None] | None = None,
     seed: int = 0,
     client: Client | None = None,
+    min_discs: int | None = None,
+    max_discs: int | None = None,
 ) -> list[Row]:
-    """Solve and bound every instance of ``directory``; write ``results.csv`` to ``out_dir``.
+    """Solve and bound every instance of ``directory`` (those named in ``only``, with
+    ``min_discs`` to ``max_discs`` discs); write ``results.csv`` to ``out_dir``.
 
     With a Dask ``client`` (:func:`urpt_gcs.cluster.open_client`) every instance is a task;
     the rows are the ones a serial run gives (the seed is fixed) but for the times, as far as
@@ -191,7 +211,7 @@ def run_cetsp(
     settings = SolveSettings(time_limit_s=time_limit_s, seed=seed)
     published = read_published(directory)
     say = progress or (lambda _msg: None)
-    paths = list(instance_paths(directory, only))
+    paths = instance_paths(directory, only, min_discs, max_discs)
     jobs = [(path, published.get(path.stem, Published(None, False))) for path in paths]
     rows: list[Row] = []
 

@@ -108,6 +108,18 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
 )
 @click.option("--only", default=None, metavar="NAME[,NAME]", help="Run only these instances.")
 @click.option(
+    "--min-discs",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Run only instances with at least this many discs.",
+)
+@click.option(
+    "--max-discs",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Run only instances with at most this many discs.",
+)
+@click.option(
     "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the search.")
@@ -116,6 +128,8 @@ def bench_cetsp_command(
     directory: Path,
     time_limit: float,
     only: str | None,
+    min_discs: int | None,
+    max_discs: int | None,
     out: Path | None,
     seed: int,
     scheduler: str | None,
@@ -135,6 +149,8 @@ def bench_cetsp_command(
                 progress=terminal_progress(),
                 seed=seed,
                 client=client,
+                min_discs=min_discs,
+                max_discs=max_discs,
             )
     except UrptError as exc:
         fail(exc)
