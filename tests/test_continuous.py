@@ -319,50 +319,6 @@ def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered() -> 
     assert tour.lower_bound <= tour.length < nn_m
 
 
-def test_few_discs_are_searched_from_every_rounds_tour(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Up to 200 discs the order search starts from each discrete round's refined tour (one
-    per length, shortest first), each a share of the time; the tour kept is no longer than
-    any it returned, and enters every disc by a distance of the test's own."""
-    from urpt_gcs.solvers import continuous
-
-    rng = np.random.default_rng(5)
-    n = 150
-    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(1.0, 3.0, n)])
-    regions = RegionSet(discs=discs, depot_xy=(50.0, 50.0))
-    rounds: list[float] = []
-    searched: list[tuple[float, float, float]] = []
-    real_refine, real_search = continuous._refine, continuous._search_discs
-
-    def refine(*args: object) -> np.ndarray:
-        pts = real_refine(*args)  # type: ignore[arg-type]
-        rounds.append(closed_length(pts, regions.depot_xy))
-        return pts
-
-    def search(
-        regions_: RegionSet, seq: np.ndarray, pts: np.ndarray, seconds: float, seed: int
-    ) -> tuple[np.ndarray, np.ndarray]:
-        out = real_search(regions_, seq, pts, seconds, seed)
-        searched.append(
-            (closed_length(pts, regions.depot_xy), seconds, closed_length(out[1], regions.depot_xy))
-        )
-        return out
-
-    solve_regions(regions, SolveSettings(time_limit_s=1.0))  # compiled before it is timed
-    monkeypatch.setattr(continuous, "_refine", refine)
-    monkeypatch.setattr(continuous, "_search_discs", search)
-    tour = solve_regions(regions, SolveSettings(time_limit_s=6.0))
-    distinct: list[float] = []
-    for length in sorted(rounds):
-        if all(abs(length - d) > 1e-9 * length for d in distinct):
-            distinct.append(length)
-    assert len(rounds) >= 2
-    assert [s[0] for s in searched] == pytest.approx(distinct, rel=1e-12)
-    assert len({round(s[1], 9) for s in searched}) == 1
-    assert tour.length <= min(s[2] for s in searched) + 1e-9
-    off = np.hypot(*(tour.touch_xy - discs[tour.touch_region, :2]).T) - discs[tour.touch_region, 2]
-    assert sorted(tour.touch_region.tolist()) == list(range(n)) and (off <= 1e-9).all()
-
-
 def test_cheapest_insertion_matches_a_scan_of_every_leg() -> None:
     # The insertion skips legs by a lower bound of their cost and takes the first leg that
     # crosses the disc: its cost must still be the least over every leg, found by brute force.

@@ -47,10 +47,6 @@ _DISC_DISCRETE_SHARE = 0.5
 # continuous search also starts from a nearest-neighbour tour, half its time each. (From 201
 # discs it cost rd400_or10 and pcb442_or10 about 1 % at 60 s; past 600 it gained 2-5 %.)
 _SECOND_START_FROM = _DISC_SAMPLE_BUDGET // _MIN_DISC_SAMPLES
-# Up to this many discs the order search starts from every discrete round's tour in turn
-# (sharing its time), not from the best one alone. (At 60 s on the 145 instances of
-# <= 200 discs; not measured on more.)
-_EVERY_ROUND_UP_TO = 200
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
@@ -170,7 +166,6 @@ def solve_regions(
     pts = _refine(regions, seq, pts)
     best_len = closed_length(pts, regions.depot_xy)
     best_seq, best_pts = seq, pts
-    found = [(best_len, seq, pts)]
     for round_ in range(rounds):
         left = discrete_budget - (time.perf_counter() - started)
         if left <= 0.05:
@@ -182,22 +177,18 @@ def solve_regions(
         seq, pts = touches(inst, tour)
         pts = _refine(regions, seq, pts)
         length = closed_length(pts, regions.depot_xy)
-        found.append((length, seq, pts))
         if length < best_len:
             best_len, best_seq, best_pts = length, seq, pts
     if with_discs:
         left = solve_budget - (time.perf_counter() - started)
+        starts = [(best_seq, best_pts)]
         if regions.n >= _SECOND_START_FROM:
             # On many discs the GTSP over their candidates is searched thinly in its time:
             # the continuous search also starts from the nearest-neighbour tour of centres.
-            starts = [(best_seq, best_pts), _nearest_neighbour(regions)]
-        elif regions.n <= _EVERY_ROUND_UP_TO:
-            starts = _distinct(found, best_len)
-        else:
-            starts = [(best_seq, best_pts)]
-        for k, (start_seq, start_pts) in enumerate(starts):
+            starts.append(_nearest_neighbour(regions))
+        for start_seq, start_pts in starts:
             seq, pts = _search_discs(
-                regions, start_seq, start_pts, left / len(starts), settings.seed + k
+                regions, start_seq, start_pts, left / len(starts), settings.seed
             )
             length = closed_length(pts, regions.depot_xy)
             if length < best_len:
@@ -225,23 +216,6 @@ def solve_regions(
         optimal_over_candidates=first.proven_optimal,
         solve_s=time.perf_counter() - started,
     )
-
-
-def _distinct(
-    found: list[tuple[float, IntArray, FloatArray]], shortest: float
-) -> list[tuple[IntArray, FloatArray]]:
-    """The refined tours of the discrete rounds, shortest first, one of each length.
-
-    From one start the order search ends in the same tour whatever its seed (its kicks are
-    local); different rounds' tours lead it to different ones, and on few discs it settles
-    in a few seconds, so searching each beats searching the best one longer."""
-    out: list[tuple[IntArray, FloatArray]] = []
-    lengths: list[float] = []
-    for length, seq, pts in sorted(found, key=lambda f: f[0]):
-        if all(abs(length - other) > 1e-9 * shortest for other in lengths):
-            out.append((seq, pts))
-            lengths.append(length)
-    return out
 
 
 def _from_relaxed(
