@@ -250,16 +250,53 @@ def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
     pos = np.full(n, -1, dtype=np.int64)
     pos[seq] = np.arange(seq.size)
     start = path_length(pts, ends)
+    cur_seq, cur_pts = seq.copy(), pts.copy()
     best_seq, best_pts = seq.copy(), pts.copy()
-    got = _kicks(seq, pts, pos, discs, ends, _among(discs, seq), best_seq, best_pts, 3000, rng)
+    near = _among(discs, seq)
+    got = _kicks(seq, pts, pos, discs, ends, near, cur_seq, cur_pts, best_seq, best_pts, 3000, rng)
     assert sorted(best_seq.tolist()) == kept.tolist()
     assert (pos[np.setdiff1d(np.arange(n), kept)] == -1).all()
-    assert (pos[best_seq] == np.arange(seq.size)).all()
-    assert (seq == best_seq).all() and (pts == best_pts).all()
+    assert (pos[cur_seq] == np.arange(seq.size)).all()
+    assert (seq == cur_seq).all() and (pts == cur_pts).all()
+    assert path_length(cur_pts, ends) <= got * (1.0 + 1e-9)
     inside = np.hypot(*(best_pts - discs[best_seq, :2]).T) <= discs[best_seq, 2]
     assert inside.all()
     assert got == pytest.approx(path_length(best_pts, ends), rel=1e-12)
     assert got < 0.5 * start  # a random order through the centres is long
+
+
+def test_a_drifting_search_keeps_tours_within_its_drift_and_returns_the_shortest() -> None:
+    # With a drift the kept tour may be longer than the shortest met, by that factor at
+    # most; the shortest is the one returned, and it still touches every disc.
+    from urpt_gcs.solvers.disc_tour import _kicks, neighbours, path_length
+
+    rng = np.random.default_rng(21)
+    n = 250
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(1, 6, n)])
+    depot = np.asarray([50.0, 50.0])
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    seq = rng.permutation(n)
+    pts = discs[seq, :2].copy()
+    pos = np.empty(n, dtype=np.int64)
+    pos[seq] = np.arange(n)
+    start = path_length(pts, ends)
+    cur_seq, cur_pts = seq.copy(), pts.copy()
+    best_seq, best_pts = seq.copy(), pts.copy()
+    drift = 0.01
+    tours = (cur_seq, cur_pts, best_seq, best_pts)
+    got = _kicks(seq, pts, pos, discs, ends, neighbours(discs), *tours, 3000, rng, drift)
+    assert got == pytest.approx(path_length(best_pts, ends), rel=1e-12)
+    kept = path_length(cur_pts, ends)
+    assert got < kept <= got * (1.0 + drift) * (1.0 + 1e-12)  # it wandered, within the drift
+    assert sorted(best_seq.tolist()) == list(range(n))
+    assert (np.hypot(*(best_pts - discs[best_seq, :2]).T) <= discs[best_seq, 2]).all()
+    assert got < 0.5 * start
+    # Through improve(): never longer than the start, every disc touched.
+    got_seq, got_pts = improve(seq, pts, discs, depot, time_limit_s=1.0, seed=3, drift=0.005)
+    assert sorted(got_seq.tolist()) == list(range(n))
+    tour = np.vstack([depot, got_pts])
+    assert (_polyline_distance(tour, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9) + 1e-9).all()
+    assert closed_length(got_pts, tuple(depot)) <= closed_length(pts, tuple(depot))
 
 
 @needs_shared("bench/cetsp")

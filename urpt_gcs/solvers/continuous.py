@@ -47,6 +47,10 @@ _DISC_DISCRETE_SHARE = 0.5
 # continuous search also starts from a nearest-neighbour tour, half its time each. (From 201
 # discs it cost rd400_or10 and pcb442_or10 about 1 % at 60 s; past 600 it gained 2-5 %.)
 _SECOND_START_FROM = _DISC_SAMPLE_BUDGET // _MIN_DISC_SAMPLES
+# Above this many discs the order search keeps kicked tours up to _DRIFT longer than the
+# shortest it met (record-to-record): from one start, strict descent stalls there.
+_DRIFT_ABOVE = 200
+_DRIFT = 0.002
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
@@ -287,19 +291,23 @@ def _search_discs(
     """
     assert regions.discs is not None
     discs = regions.discs
+    drift = _DRIFT if regions.n > _DRIFT_ABOVE else 0.0
     # A disc touched twice keeps its first touch.
     _, first = np.unique(seq, return_index=True)
     keep = np.sort(first)
     seq, pts = np.asarray(seq)[keep], np.asarray(pts)[keep]
     if regions.depot_xy is not None:
-        return disc_tour.improve(seq, pts, discs, np.asarray(regions.depot_xy), seconds, seed)
+        depot = np.asarray(regions.depot_xy)
+        return disc_tour.improve(seq, pts, discs, depot, seconds, seed, drift)
     for half in range(2):
         if len(seq) < 3:
             break
         k = 0 if half == 0 else len(seq) // 2
         seq, pts = np.roll(seq, -k), np.roll(pts, -k, axis=0)
         anchor = pts[0].copy()
-        rest_seq, rest_pts = disc_tour.improve(seq[1:], pts[1:], discs, anchor, seconds / 2, seed)
+        rest_seq, rest_pts = disc_tour.improve(
+            seq[1:], pts[1:], discs, anchor, seconds / 2, seed, drift
+        )
         seq = np.concatenate([seq[:1], rest_seq])
         pts = np.vstack([anchor[None, :], rest_pts])
     return seq, pts

@@ -882,17 +882,20 @@ def _kicks(
     discs: FloatArray,
     ends: FloatArray,
     neigh: IntArray,
-    best_seq: IntArray,
-    best_pts: FloatArray,
+    cur_seq: IntArray,
+    cur_pts: FloatArray,
+    rec_seq: IntArray,
+    rec_pts: FloatArray,
     count: int,
     rng: np.random.Generator,
+    drift: float = 0.0,
 ) -> float:
     """``count`` kicks, each followed by a descent from the stops it changed and kept or
-    undone (:func:`_keep_or_undo`). ``seq, pts`` start and end as ``best_seq, best_pts``;
-    the best length."""
+    undone (:func:`_keep_or_undo`). ``seq, pts`` start and end as the kept tour
+    ``cur_seq, cur_pts``; the shortest met is ``rec_seq, rec_pts``, and its length returned."""
     n = seq.size
-    best_len = path_length(best_pts, ends)
-    tol = _MIN_GAIN * best_len
+    rec_len = path_length(rec_pts, ends)
+    tol = _MIN_GAIN * rec_len
     active = np.zeros(pos.size, dtype=np.bool_)
     queue = np.empty(pos.size, dtype=np.int64)
     window = min(n, WINDOW)
@@ -921,8 +924,10 @@ def _kicks(
                 _settle(seq, pts, discs, ends, at - 2, at + 1)
                 size = _wake(seq, active, queue, 0, size, at - 2, at + 1)
         _search(seq, pts, pos, discs, ends, neigh, active, queue, size, tol)
-        best_len = _keep_or_undo(seq, pts, pos, ends, best_seq, best_pts, best_len)
-    return best_len
+        rec_len = _keep_or_undo(
+            seq, pts, pos, ends, cur_seq, cur_pts, rec_seq, rec_pts, rec_len, drift
+        )
+    return rec_len
 
 
 @nb.njit(cache=True)
@@ -931,22 +936,31 @@ def _keep_or_undo(
     pts: FloatArray,
     pos: IntArray,
     ends: FloatArray,
-    best_seq: IntArray,
-    best_pts: FloatArray,
-    best_len: float,
+    cur_seq: IntArray,
+    cur_pts: FloatArray,
+    rec_seq: IntArray,
+    rec_pts: FloatArray,
+    rec_len: float,
+    drift: float,
 ) -> float:
-    """The tour ``seq, pts`` kept as the best if no longer (ties too: they let the search
-    drift across plateaus), else undone back to the best; the best length."""
+    """The tour ``seq, pts`` kept (as ``cur_seq, cur_pts``) if no longer than the shortest
+    met (``rec_seq, rec_pts``, of length ``rec_len``) times ``1 + drift`` (ties too: they let
+    the search cross plateaus), else undone back to the kept one. A shorter one becomes the
+    shortest met; its length is returned."""
     length = path_length(pts, ends)
-    if length <= best_len * (1.0 + 1e-12):
-        best_seq[:] = seq
-        best_pts[:] = pts
-        return min(length, best_len)
-    seq[:] = best_seq
-    pts[:] = best_pts
+    if length < rec_len:
+        rec_seq[:] = seq
+        rec_pts[:] = pts
+        rec_len = length
+    if length <= rec_len * (1.0 + max(drift, 1e-12)):
+        cur_seq[:] = seq
+        cur_pts[:] = pts
+        return rec_len
+    seq[:] = cur_seq
+    pts[:] = cur_pts
     for k in range(seq.size):
         pos[seq[k]] = k
-    return best_len
+    return rec_len
 
 
 def improve(
@@ -956,12 +970,14 @@ def improve(
     depot_xy: FloatArray,
     time_limit_s: float,
     seed: int = 0,
+    drift: float = 0.0,
 ) -> tuple[IntArray, FloatArray]:
     """A shorter tour through the discs of ``seq`` from a given one, by iterated local search.
 
     ``seq`` holds discs (rows of ``discs``, each once); ``pts`` a point in each. Runs for
     about ``time_limit_s`` and returns the best order and points found (never longer than
-    the start).
+    the start). A kicked tour is kept when no longer than the kept one or than the
+    shortest met by a factor ``1 + drift``.
     """
     started = time.perf_counter()
     # The search numbers the discs of the tour 0..n-1 in their starting order: ``seq`` may
@@ -981,6 +997,7 @@ def improve(
     pos[seq] = np.arange(n)
     neigh = neighbours(discs)
     _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
+    cur_seq, cur_pts = seq.copy(), pts.copy()
     best_seq, best_pts = seq.copy(), pts.copy()
     best_len = path_length(pts, ends)
     rng = np.random.default_rng(seed)
@@ -988,7 +1005,21 @@ def improve(
     count = 16
     while n >= 4 and time.perf_counter() - started < time_limit_s:
         tick = time.perf_counter()
-        best_len = _kicks(seq, pts, pos, discs, ends, neigh, best_seq, best_pts, count, rng)
+        best_len = _kicks(
+            seq,
+            pts,
+            pos,
+            discs,
+            ends,
+            neigh,
+            cur_seq,
+            cur_pts,
+            best_seq,
+            best_pts,
+            count,
+            rng,
+            drift,
+        )
         took = time.perf_counter() - tick
         left = time_limit_s - (time.perf_counter() - started)
         count = int(np.clip(count * min(_BATCH_S, max(left, 0.0)) / max(took, 1e-6), 1, 4 * count))
@@ -1001,10 +1032,26 @@ def improve(
                 _descend(kept, pts[:m], pos, discs, ends, near, 0, m - 1)
                 if m > WINDOW:
                     sub_seq, sub_pts = kept.copy(), pts[:m].copy()
-                    _kicks(kept, pts[:m], pos, discs, ends, near, sub_seq, sub_pts, count, rng)
+                    rec_seq, rec_pts = sub_seq.copy(), sub_pts.copy()
+                    _kicks(
+                        kept,
+                        pts[:m],
+                        pos,
+                        discs,
+                        ends,
+                        near,
+                        sub_seq,
+                        sub_pts,
+                        rec_seq,
+                        rec_pts,
+                        count,
+                        rng,
+                    )
             _put_back(seq, pts, pos, discs, ends, m, taken)
             _descend(seq, pts, pos, discs, ends, neigh, 0, n - 1)
-            best_len = _keep_or_undo(seq, pts, pos, ends, best_seq, best_pts, best_len)
+            best_len = _keep_or_undo(
+                seq, pts, pos, ends, cur_seq, cur_pts, best_seq, best_pts, best_len, drift
+            )
     exact = exact_positions(best_seq, best_pts, discs, depot)
     if path_length(exact, ends) < best_len:
         best_pts, best_len = exact, path_length(exact, ends)
