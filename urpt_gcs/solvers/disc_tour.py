@@ -976,8 +976,8 @@ def improve(
 
     ``seq`` holds discs (rows of ``discs``, each once); ``pts`` a point in each. Runs for
     about ``time_limit_s`` and returns the best order and points found (never longer than
-    the start). A kicked tour is kept when no longer than the kept one or than the
-    shortest met by a factor ``1 + drift``.
+    the start). A kicked tour is kept (the next kicks start from it) when it is no longer
+    than the shortest met times ``1 + drift``; else it is undone.
     """
     started = time.perf_counter()
     # The search numbers the discs of the tour 0..n-1 in their starting order: ``seq`` may
@@ -997,29 +997,17 @@ def improve(
     pos[seq] = np.arange(n)
     neigh = neighbours(discs)
     _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
+    # The tour kept (which the kicks start from) and the shortest met.
     cur_seq, cur_pts = seq.copy(), pts.copy()
     best_seq, best_pts = seq.copy(), pts.copy()
+    tours = (cur_seq, cur_pts, best_seq, best_pts)
     best_len = path_length(pts, ends)
     rng = np.random.default_rng(seed)
     # Kicks run in batches sized to take about _BATCH_S each, so the time limit holds.
     count = 16
     while n >= 4 and time.perf_counter() - started < time_limit_s:
         tick = time.perf_counter()
-        best_len = _kicks(
-            seq,
-            pts,
-            pos,
-            discs,
-            ends,
-            neigh,
-            cur_seq,
-            cur_pts,
-            best_seq,
-            best_pts,
-            count,
-            rng,
-            drift,
-        )
+        best_len = _kicks(seq, pts, pos, discs, ends, neigh, *tours, count, rng, drift)
         took = time.perf_counter() - tick
         left = time_limit_s - (time.perf_counter() - started)
         count = int(np.clip(count * min(_BATCH_S, max(left, 0.0)) / max(took, 1e-6), 1, 4 * count))
@@ -1031,27 +1019,12 @@ def improve(
                 near = _among(discs, kept)
                 _descend(kept, pts[:m], pos, discs, ends, near, 0, m - 1)
                 if m > WINDOW:
-                    sub_seq, sub_pts = kept.copy(), pts[:m].copy()
-                    rec_seq, rec_pts = sub_seq.copy(), sub_pts.copy()
-                    _kicks(
-                        kept,
-                        pts[:m],
-                        pos,
-                        discs,
-                        ends,
-                        near,
-                        sub_seq,
-                        sub_pts,
-                        rec_seq,
-                        rec_pts,
-                        count,
-                        rng,
-                    )
+                    # Kept and shortest: strict descent here (no drift).
+                    sub = (kept.copy(), pts[:m].copy(), kept.copy(), pts[:m].copy())
+                    _kicks(kept, pts[:m], pos, discs, ends, near, *sub, count, rng)
             _put_back(seq, pts, pos, discs, ends, m, taken)
             _descend(seq, pts, pos, discs, ends, neigh, 0, n - 1)
-            best_len = _keep_or_undo(
-                seq, pts, pos, ends, cur_seq, cur_pts, best_seq, best_pts, best_len, drift
-            )
+            best_len = _keep_or_undo(seq, pts, pos, ends, *tours, best_len, drift)
     exact = exact_positions(best_seq, best_pts, discs, depot)
     if path_length(exact, ends) < best_len:
         best_pts, best_len = exact, path_length(exact, ends)
