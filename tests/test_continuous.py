@@ -49,14 +49,33 @@ def test_refinement_never_lengthens_and_stays_inside() -> None:
     assert before - 2 * discs[:, 2].sum() - 1e-9 <= after < before
 
 
-def test_solve_regions_enters_every_disc_and_brackets_the_optimum() -> None:
+def _drifts_passed(monkeypatch: pytest.MonkeyPatch) -> list[float]:
+    """The drift of every call of the order search from here on."""
+    from urpt_gcs.solvers import disc_tour
+
+    drifts: list[float] = []
+    real = disc_tour.improve
+
+    def spy(*args):  # type: ignore[no-untyped-def]
+        drifts.append(args[6])  # (seq, pts, discs, start, seconds, seed, drift)
+        return real(*args)
+
+    monkeypatch.setattr(disc_tour, "improve", spy)
+    return drifts
+
+
+def test_solve_regions_enters_every_disc_and_brackets_the_optimum(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     # Discs on a circle of radius 20 around the depot: the tour is about the circle through
     # their inner rims, 2 pi (20 - r), give or take the chords.
     k, r = 10, 2.0
     a = 2 * np.pi * np.arange(k) / k
     discs = np.column_stack([20 * np.cos(a), 20 * np.sin(a), np.full(k, r)])
     regions = RegionSet(discs=discs, depot_xy=(18.0, 0.0))
+    drifts = _drifts_passed(monkeypatch)
     tour = solve_regions(regions, SolveSettings(time_limit_s=2.0))
+    assert drifts and set(drifts) == {0.0}  # few discs: the strict rule
     seen = regions.contains(tour.touch_xy, tour.touch_region)
     assert seen.all() and sorted(tour.touch_region.tolist()) == list(range(k))
     polygon = k * 2 * (20 - r) * np.sin(np.pi / k)  # the inscribed polygon through inner rims
@@ -331,7 +350,9 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
     assert length <= tour.discrete_length + 1e-9
 
 
-def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered() -> None:
+def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """From 600 discs the search also starts from the nearest-neighbour tour of centres: that
     tour holds every disc once, and the tour kept enters every disc (by a distance of its
     own), is as long as its legs, and is no longer than the nearest-neighbour tour."""
@@ -347,7 +368,9 @@ def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered() -> 
     nn_m = float(
         np.hypot(*np.diff(np.vstack([[50.0, 50.0], centres, [50.0, 50.0]]), axis=0).T).sum()
     )
+    drifts = _drifts_passed(monkeypatch)
     tour = solve_regions(regions, SolveSettings(time_limit_s=4.0))
+    assert len(drifts) == 2 and set(drifts) == {0.002}  # many discs: record-to-record
     assert sorted(tour.touch_region.tolist()) == list(range(n))
     off = np.hypot(*(tour.touch_xy - discs[tour.touch_region, :2]).T) - discs[tour.touch_region, 2]
     assert (off <= 1e-9).all()
