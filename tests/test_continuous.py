@@ -257,7 +257,7 @@ def test_order_search_touches_every_disc_and_never_lengthens() -> None:
 def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
     # The kick loop also runs on a tour of some of the discs (the others taken out, their
     # position -1): it must neither put one of those in nor lose one of its own.
-    from urpt_gcs.solvers.disc_tour import _among, _kicks, path_length
+    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, _among, _kicks, path_length
 
     rng = np.random.default_rng(14)
     n = 300
@@ -271,8 +271,9 @@ def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
     start = path_length(pts, ends)
     cur_seq, cur_pts = seq.copy(), pts.copy()
     best_seq, best_pts = seq.copy(), pts.copy()
-    near = _among(discs, seq)
-    got = _kicks(seq, pts, pos, discs, ends, near, cur_seq, cur_pts, best_seq, best_pts, 3000, rng)
+    near, wide = _among(discs, seq), _among(discs, seq, RUIN_NEIGHBOURS)
+    tours = (cur_seq, cur_pts, best_seq, best_pts)
+    got = _kicks(seq, pts, pos, discs, ends, near, wide, *tours, 3000, rng)
     assert sorted(best_seq.tolist()) == kept.tolist()
     assert (pos[np.setdiff1d(np.arange(n), kept)] == -1).all()
     assert (pos[cur_seq] == np.arange(seq.size)).all()
@@ -303,7 +304,8 @@ def test_a_drifting_search_keeps_tours_within_its_drift_and_returns_the_shortest
     best_seq, best_pts = seq.copy(), pts.copy()
     drift = 0.01
     tours = (cur_seq, cur_pts, best_seq, best_pts)
-    got = _kicks(seq, pts, pos, discs, ends, neighbours(discs), *tours, 3000, rng, drift)
+    near, wide = neighbours(discs), neighbours(discs, 30)
+    got = _kicks(seq, pts, pos, discs, ends, near, wide, *tours, 3000, rng, drift)
     assert got == pytest.approx(path_length(best_pts, ends), rel=1e-12)
     kept = path_length(cur_pts, ends)
     assert got < kept <= got * (1.0 + drift) * (1.0 + 1e-12)  # it wandered, within the drift
