@@ -288,7 +288,7 @@ def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
 def test_a_drifting_search_keeps_tours_within_its_drift_and_returns_the_shortest() -> None:
     # With a drift the kept tour may be longer than the shortest met, by that factor at
     # most; the shortest is the one returned, and it still touches every disc.
-    from urpt_gcs.solvers.disc_tour import _kicks, neighbours, path_length
+    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, _kicks, neighbours, path_length
 
     rng = np.random.default_rng(21)
     n = 250
@@ -304,7 +304,7 @@ def test_a_drifting_search_keeps_tours_within_its_drift_and_returns_the_shortest
     best_seq, best_pts = seq.copy(), pts.copy()
     drift = 0.01
     tours = (cur_seq, cur_pts, best_seq, best_pts)
-    near, wide = neighbours(discs), neighbours(discs, 30)
+    near, wide = neighbours(discs), neighbours(discs, RUIN_NEIGHBOURS)
     got = _kicks(seq, pts, pos, discs, ends, near, wide, *tours, 3000, rng, drift)
     assert got == pytest.approx(path_length(best_pts, ends), rel=1e-12)
     kept = path_length(cur_pts, ends)
@@ -447,3 +447,95 @@ def test_the_insertion_floor_never_exceeds_the_insertion_cost() -> None:
         for j in range(-1, m):
             cost = _insert_cost(pts, ends, discs, 0, j)[0]
             assert _insert_floor(pts, ends, discs, 0, j) <= cost + 1e-9, (trial, j)
+
+
+def test_moving_the_depot_puts_it_on_one_of_the_cheapest_far_legs() -> None:
+    # The closed tour is the same cycle of stops, the depot now on a leg at least ``away``
+    # stops from its old one, and that leg is among the cheapest such (checked against
+    # every rotation's length, computed here).
+    from urpt_gcs.solvers.disc_tour import _DEPOT_CHOICES, _move_depot, path_length
+
+    rng = np.random.default_rng(8)
+    n, away = 40, 6
+    depot = np.array([50.0, 50.0])
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    angle = np.sort(rng.uniform(0, 2 * np.pi, n))
+    ring = np.column_stack([50 + 30 * np.cos(angle), 50 + 30 * np.sin(angle)])
+    seq0 = np.arange(n, dtype=np.int64)
+    lengths = {
+        k: path_length(np.ascontiguousarray(np.roll(ring, -k, axis=0)), ends)
+        for k in range(away, n - away + 1)
+    }
+    cheapest = sorted(lengths, key=lengths.__getitem__)[:_DEPOT_CHOICES]
+    seen = set()
+    for _ in range(40):
+        seq, pts = seq0.copy(), ring.copy()
+        pos = np.arange(n, dtype=np.int64)
+        at = _move_depot(seq, pts, pos, ends, rng, away)
+        k = int(seq[0])
+        assert at == n - k and seq[at] == 0  # the old first stop
+        assert (seq == np.roll(seq0, -k)).all() and (pts == np.roll(ring, -k, axis=0)).all()
+        assert (pos[seq] == np.arange(n)).all()
+        assert k in cheapest
+        assert path_length(pts, ends) == pytest.approx(lengths[k], rel=1e-12)
+        seen.add(k)
+    assert len(seen) > 1  # chosen at random among them
+    # Too few stops for a leg that far: nothing moves.
+    seq, pts, pos = seq0[:11].copy(), ring[:11].copy(), np.arange(11, dtype=np.int64)
+    assert _move_depot(seq, pts, pos, ends, rng, away) == -1
+    assert (seq == seq0[:11]).all() and (pts == ring[:11]).all()
+
+
+def test_an_escape_keeps_every_disc_and_never_lengthens_the_shortest_tour() -> None:
+    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, _escape, neighbours, path_length
+
+    rng = np.random.default_rng(31)
+    n = 120
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(1, 6, n)])
+    depot = np.asarray([50.0, 50.0])
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    seq = rng.permutation(n)
+    pts = discs[seq, :2].copy()
+    seq, pts = improve(seq, pts, discs, depot, time_limit_s=0.5, seed=2)
+    pos = np.empty(n, dtype=np.int64)
+    pos[seq] = np.arange(n)
+    tours = (seq.copy(), pts.copy(), seq.copy(), pts.copy())
+    before = path_length(pts, ends)
+    near, wide = neighbours(discs), neighbours(discs, RUIN_NEIGHBOURS)
+    for _ in range(3):
+        got = _escape(seq, pts, pos, discs, ends, near, wide, tours, 50, rng)
+        cur_seq, cur_pts, best_seq, best_pts = tours
+        assert got == pytest.approx(path_length(best_pts, ends), rel=1e-12)
+        assert got <= before * (1 + 1e-12)
+        assert (seq == cur_seq).all() and (pts == cur_pts).all()
+        assert (pos[seq] == np.arange(n)).all()
+        assert sorted(best_seq.tolist()) == list(range(n))
+        assert (np.hypot(*(best_pts - discs[best_seq, :2]).T) <= discs[best_seq, 2]).all()
+        before = got
+
+
+@pytest.mark.parametrize(("n", "escapes"), [(40, True), (260, False)])
+def test_a_stalled_search_escapes_only_on_few_discs(
+    monkeypatch: pytest.MonkeyPatch, n: int, escapes: bool
+) -> None:
+    from urpt_gcs.solvers import disc_tour
+
+    calls: list[int] = []
+    real = disc_tour._escape
+
+    def spy(seq, *args):  # type: ignore[no-untyped-def]
+        calls.append(seq.size)
+        return real(seq, *args)
+
+    monkeypatch.setattr(disc_tour, "_escape", spy)
+    monkeypatch.setattr(disc_tour, "_STALL_S", 0.1)
+    monkeypatch.setattr(disc_tour, "_ESCAPE_S", 0.05)
+    rng = np.random.default_rng(4)
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(1, 6, n)])
+    depot = np.asarray([50.0, 50.0])
+    seq = rng.permutation(n)
+    got_seq, got = disc_tour.improve(seq, discs[seq, :2].copy(), discs, depot, 1.5, seed=1)
+    assert bool(calls) == escapes
+    assert sorted(got_seq.tolist()) == list(range(n))
+    tour = np.vstack([depot, got])
+    assert (_polyline_distance(tour, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9) + 1e-9).all()

@@ -15,7 +15,9 @@ stops" need no special case.
   the stops around the change. Kicks (a local double bridge, or a disc and its nearest taken
   out and put back greedily) run in one compiled loop, each followed by a descent from the
   stops it changed; now and then the same search runs on the stops alone (the discs their
-  legs cross anyway taken out and put back after). The exact positions for the best tour.
+  legs cross anyway taken out and put back after). On few discs a search that has stalled
+  moves the depot to a far leg and searches from there a while (:func:`_escape`). The exact
+  positions for the best tour.
 """
 
 from __future__ import annotations
@@ -45,6 +47,19 @@ _RUIN_SHARE = 0.5
 # Share of the batches of kicks after which the search also runs on the stops alone, the
 # discs their legs cross anyway taken out and put back after.
 _STRIP_SHARE = 0.3
+# Up to this many discs, a search that has not shortened the tour by _STALL_GAIN (relative)
+# in _STALL_S seconds moves the depot to one of the _DEPOT_CHOICES cheapest legs at least
+# _DEPOT_AWAY stops from where it is, and searches from there for _ESCAPE_S seconds; the
+# shortest tour met is kept either way. (No move or kick takes the depot out and puts it
+# on a far leg; 2-opt changes one of its legs only. bubbles4's tour stuck 0.15 % above its
+# best known leaves the depot on the other side of the ring from the best known's.) Above
+# it the drift acceptance lets the search move instead.
+_ESCAPE_MAX_DISCS = 200
+_STALL_S = 3.0
+_STALL_GAIN = 1e-9
+_ESCAPE_S = 1.0
+_DEPOT_CHOICES = 6
+_DEPOT_AWAY = 10
 # Seconds a batch of kicks should take (the time limit is checked between batches).
 _BATCH_S = 0.05
 # Stops kept this far (relative to the radius) inside their disc.
@@ -698,6 +713,48 @@ def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int)
 
 
 @nb.njit(cache=True)
+def _move_depot(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    ends: FloatArray,
+    rng: np.random.Generator,
+    away: int,
+) -> int:
+    """Move the depot of the closed tour (``ends`` both the depot) to another leg: one of
+    the ``_DEPOT_CHOICES`` legs at least ``away`` stops from it where that costs least, at
+    random. The stops from that leg's end come first; the position of the stop that was
+    first (``-1`` when no leg is that far)."""
+    n = seq.size
+    if n < 2 * away + 1:
+        return -1
+    dx, dy = ends[0, 0], ends[0, 1]
+    # The last stop joined to the first, and the depot put between stops k-1 and k.
+    close = (
+        _dist(pts[n - 1, 0], pts[n - 1, 1], pts[0, 0], pts[0, 1])
+        - _dist(dx, dy, pts[0, 0], pts[0, 1])
+        - _dist(pts[n - 1, 0], pts[n - 1, 1], dx, dy)
+    )
+    legs = np.arange(away, n - away + 1)
+    cost = np.empty(legs.size)
+    for q in range(legs.size):
+        k = legs[q]
+        ax, ay, bx, by = pts[k - 1, 0], pts[k - 1, 1], pts[k, 0], pts[k, 1]
+        cost[q] = close + _dist(ax, ay, dx, dy) + _dist(dx, dy, bx, by) - _dist(ax, ay, bx, by)
+    choices = min(_DEPOT_CHOICES, legs.size)
+    k = int(legs[np.argsort(cost)[rng.integers(0, choices)]])
+    old_seq = seq.copy()
+    old_pts = pts.copy()
+    for j in range(n):
+        src = (j + k) % n
+        seq[j] = old_seq[src]
+        pts[j, 0] = old_pts[src, 0]
+        pts[j, 1] = old_pts[src, 1]
+        pos[seq[j]] = j
+    return n - k
+
+
+@nb.njit(cache=True)
 def _put_at(seq: IntArray, pts: FloatArray, m: int, at: int, d: int, x: float, y: float) -> None:
     """Disc ``d`` at position ``at`` of the tour of the first ``m`` stops, point ``(x, y)``;
     the stops from ``at`` on shift one along."""
@@ -1012,8 +1069,17 @@ def improve(
     rng = np.random.default_rng(seed)
     # Kicks run in batches sized to take about _BATCH_S each, so the time limit holds.
     count = 16
+    # The shortest length when the search last made headway, and when.
+    headway_len, headway_at = best_len, started
     while n >= 4 and time.perf_counter() - started < time_limit_s:
         tick = time.perf_counter()
+        if best_len < headway_len * (1.0 - _STALL_GAIN):
+            headway_len, headway_at = best_len, tick
+        stalled = tick - headway_at > _STALL_S and n <= _ESCAPE_MAX_DISCS
+        if stalled and time_limit_s - (tick - started) > _ESCAPE_S:
+            best_len = _escape(seq, pts, pos, discs, ends, neigh, wide, tours, count, rng)
+            headway_at = time.perf_counter()
+            continue
         best_len = _kicks(seq, pts, pos, discs, ends, neigh, wide, *tours, count, rng, drift)
         took = time.perf_counter() - tick
         left = time_limit_s - (time.perf_counter() - started)
@@ -1039,6 +1105,46 @@ def improve(
     if best_len >= start_len:
         return ids[start_seq], start_pts
     return ids[best_seq], best_pts
+
+
+def _escape(
+    seq: IntArray,
+    pts: FloatArray,
+    pos: IntArray,
+    discs: FloatArray,
+    ends: FloatArray,
+    neigh: IntArray,
+    wide: IntArray,
+    tours: tuple[IntArray, FloatArray, IntArray, FloatArray],
+    count: int,
+    rng: np.random.Generator,
+) -> float:
+    """From the shortest tour met, the depot moved far along it (:func:`_move_depot`) and
+    the kicks run from there for ``_ESCAPE_S`` seconds. A shorter tour found becomes the
+    kept and the shortest one; else ``seq, pts`` go back to the kept tour. The shortest
+    length."""
+    cur_seq, cur_pts, best_seq, best_pts = tours
+    best_len = path_length(best_pts, ends)
+    n = seq.size
+    seq[:], pts[:] = best_seq, best_pts
+    pos[seq] = np.arange(n)
+    at = _move_depot(seq, pts, pos, ends, rng, min(_DEPOT_AWAY, n // 4))
+    if at >= 0:
+        for lo, hi in ((-1, 2), (n - 3, n), (at - 2, at + 1)):
+            _settle(seq, pts, discs, ends, lo, hi)
+        _descent(seq, pts, pos, discs, ends, neigh, 0, n - 1)
+        trial = (seq.copy(), pts.copy(), seq.copy(), pts.copy())
+        until = time.perf_counter() + _ESCAPE_S
+        length = path_length(pts, ends)
+        while time.perf_counter() < until:
+            length = _kicks(seq, pts, pos, discs, ends, neigh, wide, *trial, count, rng)
+        if length < best_len:
+            cur_seq[:], cur_pts[:] = trial[2], trial[3]
+            best_seq[:], best_pts[:] = trial[2], trial[3]
+            best_len = length
+    seq[:], pts[:] = cur_seq, cur_pts
+    pos[seq] = np.arange(n)
+    return best_len
 
 
 @nb.njit(cache=True)
