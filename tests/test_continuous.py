@@ -352,33 +352,67 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
     assert length <= tour.discrete_length + 1e-9
 
 
-def test_many_discs_are_searched_from_two_starts_and_every_disc_is_entered(
-    monkeypatch: pytest.MonkeyPatch,
+@pytest.mark.parametrize("depot", [(50.0, 50.0), None])
+def test_many_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
+    monkeypatch: pytest.MonkeyPatch, depot: tuple[float, float] | None
 ) -> None:
-    """From 600 discs the search also starts from the nearest-neighbour tour of centres: that
-    tour holds every disc once, and the tour kept enters every disc (by a distance of its
-    own), is as long as its legs, and is no longer than the nearest-neighbour tour."""
-    from urpt_gcs.solvers.continuous import _SECOND_START_FROM, _nearest_neighbour
+    """Above _RESTARTS_ABOVE discs the order search runs from the discrete tour and from
+    random insertion tours: every start holds every disc once with its point inside, the
+    starts differ, and the tour kept enters every disc (by shapely's distance), is as long
+    as its legs and no longer than the shortest tour any of the searches returned."""
+    from urpt_gcs.solvers import disc_tour
+    from urpt_gcs.solvers.continuous import _RESTARTS_ABOVE
 
     rng = np.random.default_rng(11)
-    n = _SECOND_START_FROM + 19
+    n = _RESTARTS_ABOVE + 40
     discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 4.0, n)])
-    regions = RegionSet(discs=discs, depot_xy=(50.0, 50.0))
-    order, centres = _nearest_neighbour(regions)
-    assert sorted(order.tolist()) == list(range(n))
-    assert np.array_equal(centres, discs[order, :2])
-    nn_m = float(
-        np.hypot(*np.diff(np.vstack([[50.0, 50.0], centres, [50.0, 50.0]]), axis=0).T).sum()
-    )
-    drifts = _drifts_passed(monkeypatch)
+    regions = RegionSet(discs=discs, depot_xy=depot)
+    calls: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
+    real = disc_tour.improve
+
+    def spy(*args):  # type: ignore[no-untyped-def]
+        seq, pts, _, anchor, _, _, drift = args
+        out = real(*args)
+        ring = np.vstack([anchor, out[1]])
+        calls.append((np.asarray(seq), np.asarray(pts), drift, ring))
+        return out
+
+    monkeypatch.setattr(disc_tour, "improve", spy)
     tour = solve_regions(regions, SolveSettings(time_limit_s=4.0))
-    assert len(drifts) == 2 and set(drifts) == {0.002}  # many discs: record-to-record
+    # Without a depot each search holds one stop fixed in its place: two calls a search.
+    per_search = 1 if depot is not None else 2
+    assert len(calls) >= 4 * per_search  # the discrete start, insertion starts, the last
+    assert {c[2] for c in calls} == {0.002}  # many discs: record-to-record
+    firsts = calls[::per_search]
+    orders = set()
+    for seq, pts, _, _ in firsts:
+        # Without a depot the fixed stop's disc is not among those searched.
+        assert len(seq) == len(set(seq.tolist())) == (n if depot is not None else n - 1)
+        off = np.hypot(*(pts - discs[seq, :2]).T) - discs[seq, 2]
+        assert (off <= 1e-9).all()
+        orders.add(tuple(seq.tolist()))
+    assert len(orders) == len(firsts)  # no two starts alike
     assert sorted(tour.touch_region.tolist()) == list(range(n))
-    off = np.hypot(*(tour.touch_xy - discs[tour.touch_region, :2]).T) - discs[tour.touch_region, 2]
-    assert (off <= 1e-9).all()
-    legs = np.vstack([[50.0, 50.0], tour.touch_xy, [50.0, 50.0]])
+    ring = np.asarray(tour.points_xy if depot is None else np.vstack([depot, tour.points_xy]))
+    assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
+    legs = np.vstack([ring, ring[:1]])
     assert tour.length == pytest.approx(float(np.hypot(*np.diff(legs, axis=0).T).sum()), rel=1e-9)
-    assert tour.lower_bound <= tour.length < nn_m
+    returned = [float(np.hypot(*np.diff(np.vstack([r, r[:1]]), axis=0).T).sum()) for *_, r in calls]
+    assert tour.lower_bound <= tour.length <= min(returned) * (1 + 1e-9)
+
+
+def test_insertion_tours_hold_every_disc_inside_and_differ() -> None:
+    from urpt_gcs.solvers.disc_tour import insertion_tour
+
+    rng = np.random.default_rng(5)
+    discs = np.column_stack([rng.uniform(0, 100, (80, 2)), rng.uniform(0.5, 9.0, 80)])
+    which = np.arange(3, 80)  # some discs left out
+    depot = np.array([50.0, 50.0])
+    tours = [insertion_tour(discs, which, depot, np.random.default_rng(s)) for s in range(4)]
+    for seq, pts in tours:
+        assert sorted(seq.tolist()) == which.tolist()
+        assert (np.hypot(*(pts - discs[seq, :2]).T) <= discs[seq, 2]).all()
+    assert len({tuple(seq.tolist()) for seq, _ in tours}) == 4
 
 
 def test_cheapest_insertion_matches_a_scan_of_every_leg() -> None:

@@ -19,7 +19,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from urpt_gcs.errors import PlanError
 from urpt_gcs.gtsp import Instance, IntArray
@@ -43,14 +42,21 @@ _ROUNDS = 3
 # continuous order search (:mod:`urpt_gcs.solvers.disc_tour`) has the rest.
 _DISC_ROUNDS = 2
 _DISC_DISCRETE_SHARE = 0.5
-# From this many discs (the sample budget shared out leaves each the fewest candidates) the
-# continuous search also starts from a nearest-neighbour tour, half its time each. (From 201
-# discs it cost rd400_or10 and pcb442_or10 about 1 % at 60 s; past 600 it gained 2-5 %.)
-_SECOND_START_FROM = _DISC_SAMPLE_BUDGET // _MIN_DISC_SAMPLES
 # Above this many discs the order search keeps kicked tours up to _DRIFT longer than the
 # shortest it met (record-to-record): from one start, strict descent stalls there.
 _DRIFT_ABOVE = 200
 _DRIFT = 0.002
+# Above this many discs one discrete solve gets _MANY_DISCRETE_SHARE of the solve time and
+# the order search runs from many starts: the discrete tour, then tours of the discs
+# inserted in random order (:func:`disc_tour.insertion_tour`), about _RESTART_S seconds
+# each; the shortest of them is searched again for the last _POLISH_SHARE. (The search
+# from one start settles within seconds into one global shape: at 60 s pcb442_or10 stayed
+# 3.2 % above its best known, while the best of ten 3 s searches from insertion tours was
+# 1.0 %.)
+_RESTARTS_ABOVE = _DRIFT_ABOVE
+_MANY_DISCRETE_SHARE = 0.15
+_RESTART_S = 3.0
+_POLISH_SHARE = 0.1
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
@@ -162,8 +168,10 @@ def solve_regions(
     base_xy, _ = regions.samples(samples)
     instance = regions.instance(base_xy)
     with_discs = regions.discs is not None
-    rounds = _DISC_ROUNDS if with_discs else _ROUNDS
-    discrete_budget = solve_budget * (_DISC_DISCRETE_SHARE if with_discs else 1.0)
+    many = with_discs and regions.n > _RESTARTS_ABOVE
+    rounds = (0 if many else _DISC_ROUNDS) if with_discs else _ROUNDS
+    share = (_MANY_DISCRETE_SHARE if many else _DISC_DISCRETE_SHARE) if with_discs else 1.0
+    discrete_budget = solve_budget * share
     first = solve(instance, solver, _share(settings, discrete_budget / (rounds + 1)))
     discrete = first.length
     seq, pts = touches(instance, first)
@@ -185,18 +193,10 @@ def solve_regions(
             best_len, best_seq, best_pts = length, seq, pts
     if with_discs:
         left = solve_budget - (time.perf_counter() - started)
-        starts = [(best_seq, best_pts)]
-        if regions.n >= _SECOND_START_FROM:
-            # On many discs the GTSP over their candidates is searched thinly in its time:
-            # the continuous search also starts from the nearest-neighbour tour of centres.
-            starts.append(_nearest_neighbour(regions))
-        for start_seq, start_pts in starts:
-            seq, pts = _search_discs(
-                regions, start_seq, start_pts, left / len(starts), settings.seed
-            )
-            length = closed_length(pts, regions.depot_xy)
-            if length < best_len:
-                best_len, best_seq, best_pts = length, seq, pts
+        seq, pts = _search_starts(regions, best_seq, best_pts, left, settings.seed)
+        length = closed_length(pts, regions.depot_xy)
+        if length < best_len:
+            best_len, best_seq, best_pts = length, seq, pts
     inside = regions.contains(best_pts, best_seq)
     if not inside.all() or np.unique(best_seq).size != regions.n:
         raise PlanError("internal check failed: a refined tour left a region; report this")
@@ -313,28 +313,46 @@ def _search_discs(
     return seq, pts
 
 
-def _nearest_neighbour(regions: RegionSet) -> tuple[IntArray, FloatArray]:
-    """The discs in nearest-neighbour order of their centres from the depot (or the first
-    disc), each touched at its centre."""
+def _search_starts(
+    regions: RegionSet, seq: IntArray, pts: FloatArray, seconds: float, seed: int
+) -> tuple[IntArray, FloatArray]:
+    """The disc tour searched (:func:`_search_discs`) for ``seconds``: on up to
+    ``_RESTARTS_ABOVE`` discs from the given tour alone; above, from it and from insertion
+    tours in turn, and the shortest of those searched again at the end. The shortest found
+    (never longer than the given tour)."""
+    if regions.n <= _RESTARTS_ABOVE:
+        return _search_discs(regions, seq, pts, seconds, seed)
+    started = time.perf_counter()
+    polish_at = started + seconds * (1.0 - _POLISH_SHARE)
+    each = min(_RESTART_S, seconds / 4.0)
+    rng = np.random.default_rng(seed)
+    best_len, best = math.inf, (seq, pts)
+    start = (seq, pts)
+    for k in range(1 << 30):
+        left = polish_at - time.perf_counter()
+        if k > 0 and left < each / 2.0:
+            break
+        found = _search_discs(regions, *start, min(each, max(left, 0.05)), seed + k)
+        length = closed_length(found[1], regions.depot_xy)
+        if length < best_len:
+            best_len, best = length, found
+        start = _insertion_start(regions, rng)
+    left = max(seconds - (time.perf_counter() - started), 0.05)
+    return _search_discs(regions, *best, left, seed + 1)
+
+
+def _insertion_start(regions: RegionSet, rng: np.random.Generator) -> tuple[IntArray, FloatArray]:
+    """A tour of every disc by random insertion (:func:`disc_tour.insertion_tour`); without
+    a depot it starts at the centre of a disc drawn at random."""
     assert regions.discs is not None
-    centres = regions.discs[:, :2]
-    n = len(centres)
-    tree = cKDTree(centres)
-    left = np.ones(n, dtype=bool)
-    order = np.empty(n, dtype=np.int64)
-    here = np.asarray(regions.depot_xy if regions.depot_xy is not None else centres[0])
-    for step in range(n):
-        _, idx = tree.query(here, k=min(n, 8))
-        free = [int(i) for i in np.atleast_1d(idx) if left[i]]
-        if free:
-            nearest = free[0]
-        else:  # the nearest ones taken: the nearest of those left
-            rest = np.flatnonzero(left)
-            nearest = int(rest[np.argmin(np.hypot(*(centres[rest] - here).T))])
-        order[step] = nearest
-        left[nearest] = False
-        here = centres[nearest]
-    return order, centres[order].copy()
+    everyone = np.arange(regions.n)
+    if regions.depot_xy is not None:
+        depot = np.asarray(regions.depot_xy, dtype=np.float64)
+        return disc_tour.insertion_tour(regions.discs, everyone, depot, rng)
+    first = int(rng.integers(regions.n))
+    centre = regions.discs[first, :2]
+    seq, pts = disc_tour.insertion_tour(regions.discs, np.delete(everyone, first), centre, rng)
+    return np.concatenate([[first], seq]), np.vstack([centre, pts])
 
 
 def _share(settings: SolveSettings, seconds: float, seed_offset: int = 0) -> SolveSettings:

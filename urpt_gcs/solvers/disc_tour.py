@@ -18,6 +18,7 @@ stops" need no special case.
   legs cross anyway taken out and put back after). On few discs a search that has stalled
   moves the depot to a far leg and searches from there a while (:func:`_escape`). The exact
   positions for the best tour.
+- :func:`insertion_tour`: a start for the search, the discs inserted in random order.
 """
 
 from __future__ import annotations
@@ -905,6 +906,26 @@ def _put_back(
         m += 1
     for k in range(m):
         pos[seq[k]] = k
+
+
+def insertion_tour(
+    discs: FloatArray, which: IntArray, depot_xy: FloatArray, rng: np.random.Generator
+) -> tuple[IntArray, FloatArray]:
+    """A tour from the depot through the discs ``which`` (rows of ``discs``), built by
+    inserting them one at a time in random order, each at its cheapest place with its point
+    the best there (free where a leg already crosses it). The order and a point in each.
+
+    A start for the order search: different insertion orders give tours of different global
+    shape, which the search's moves and kicks, all local, do not change."""
+    discs = np.ascontiguousarray(np.asarray(discs, dtype=np.float64))
+    depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    which = np.asarray(which, dtype=np.int64)
+    seq = np.empty(which.size, dtype=np.int64)
+    pts = np.empty((which.size, 2))
+    for m, d in enumerate(rng.permutation(which)):
+        _insert_cheapest(seq, pts, discs, ends, m, int(d))
+    return seq, pts
 
 
 def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
