@@ -352,19 +352,21 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
     assert length <= tour.discrete_length + 1e-9
 
 
-@pytest.mark.parametrize("depot", [(50.0, 50.0), None])
-def test_many_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
-    monkeypatch: pytest.MonkeyPatch, depot: tuple[float, float] | None
+@pytest.mark.parametrize(
+    ("many", "depot"), [(True, (50.0, 50.0)), (True, None), (False, (50.0, 50.0))]
+)
+def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
+    monkeypatch: pytest.MonkeyPatch, many: bool, depot: tuple[float, float] | None
 ) -> None:
-    """Above _RESTARTS_ABOVE discs the order search runs from the discrete tour and from
-    random insertion tours: every start holds every disc once with its point inside, the
-    starts differ, and the tour kept enters every disc (by shapely's distance), is as long
-    as its legs and no longer than the shortest tour any of the searches returned."""
+    """The order search runs from the discrete tour and from random insertion tours: every
+    start holds every disc once with its point inside, the starts differ, and the tour kept
+    enters every disc (by shapely's distance), is as long as its legs and no longer than
+    the shortest tour any of the searches returned."""
     from urpt_gcs.solvers import disc_tour
-    from urpt_gcs.solvers.continuous import _RESTARTS_ABOVE
+    from urpt_gcs.solvers.continuous import _DRIFT, _DRIFT_ABOVE
 
     rng = np.random.default_rng(11)
-    n = _RESTARTS_ABOVE + 40
+    n = _DRIFT_ABOVE + 40 if many else 60
     discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 4.0, n)])
     regions = RegionSet(discs=discs, depot_xy=depot)
     calls: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
@@ -382,7 +384,7 @@ def test_many_discs_are_searched_from_insertion_starts_and_every_disc_is_entered
     # Without a depot each search holds one stop fixed in its place: two calls a search.
     per_search = 1 if depot is not None else 2
     assert len(calls) >= 4 * per_search  # the discrete start, insertion starts, the last
-    assert {c[2] for c in calls} == {0.002}  # many discs: record-to-record
+    assert {c[2] for c in calls} == {_DRIFT if many else 0.0}  # many: record-to-record
     firsts = calls[::per_search]
     orders = set()
     for seq, pts, _, _ in firsts:

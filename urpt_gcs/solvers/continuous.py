@@ -46,17 +46,17 @@ _DISC_DISCRETE_SHARE = 0.5
 # shortest it met (record-to-record): from one start, strict descent stalls there.
 _DRIFT_ABOVE = 200
 _DRIFT = 0.002
-# Above this many discs one discrete solve gets _MANY_DISCRETE_SHARE of the solve time and
-# the order search runs from many starts: the discrete tour, then tours of the discs
+# The order search runs from many starts: the discrete tour, then tours of the discs
 # inserted in random order (:func:`disc_tour.insertion_tour`), about _RESTART_S seconds
 # each; the shortest of them is searched again for the last _POLISH_SHARE. (The search
 # from one start settles within seconds into one global shape: at 60 s pcb442_or10 stayed
 # 3.2 % above its best known, while the best of ten 3 s searches from insertion tours was
-# 1.0 %.)
-_RESTARTS_ABOVE = _DRIFT_ABOVE
-_MANY_DISCRETE_SHARE = 0.15
+# 1.0 %.) Above _ONE_SOLVE_ABOVE discs one discrete solve gets _MANY_DISCRETE_SHARE of the
+# solve time: the insertion starts serve better than more discrete rounds.
 _RESTART_S = 3.0
 _POLISH_SHARE = 0.1
+_ONE_SOLVE_ABOVE = _DRIFT_ABOVE
+_MANY_DISCRETE_SHARE = 0.15
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
@@ -168,7 +168,7 @@ def solve_regions(
     base_xy, _ = regions.samples(samples)
     instance = regions.instance(base_xy)
     with_discs = regions.discs is not None
-    many = with_discs and regions.n > _RESTARTS_ABOVE
+    many = with_discs and regions.n > _ONE_SOLVE_ABOVE
     rounds = (0 if many else _DISC_ROUNDS) if with_discs else _ROUNDS
     share = (_MANY_DISCRETE_SHARE if many else _DISC_DISCRETE_SHARE) if with_discs else 1.0
     discrete_budget = solve_budget * share
@@ -316,15 +316,15 @@ def _search_discs(
 def _search_starts(
     regions: RegionSet, seq: IntArray, pts: FloatArray, seconds: float, seed: int
 ) -> tuple[IntArray, FloatArray]:
-    """The disc tour searched (:func:`_search_discs`) for ``seconds``: on up to
-    ``_RESTARTS_ABOVE`` discs from the given tour alone; above, from it and from insertion
-    tours in turn, and the shortest of those searched again at the end. The shortest found
-    (never longer than the given tour)."""
-    if regions.n <= _RESTARTS_ABOVE:
+    """The disc tour searched (:func:`_search_discs`) for ``seconds``, from the given tour
+    and from insertion tours in turn, and the shortest of those searched again at the end.
+    The shortest found (never longer than the given tour)."""
+    # Without a depot one stop is held in its place and the others searched.
+    if regions.n - (regions.depot_xy is None) < disc_tour.MIN_SEARCHED:
         return _search_discs(regions, seq, pts, seconds, seed)
     started = time.perf_counter()
     polish_at = started + seconds * (1.0 - _POLISH_SHARE)
-    each = min(_RESTART_S, seconds / 4.0)
+    each = max(min(_RESTART_S, seconds / 4.0), 0.05)
     rng = np.random.default_rng(seed)
     best_len, best = math.inf, (seq, pts)
     start = (seq, pts)

@@ -38,6 +38,8 @@ from urpt_gcs.visibility import BoolArray
 # Nearest discs considered for a move. (With 10, some tours of 100-200 discs were local
 # optima that no kick left: suri_CETSP-100-4 stuck 0.18 % above its optimum.)
 NEIGHBOURS = 15
+# Fewer discs than this are not searched (the descent alone settles them).
+MIN_SEARCHED = 4
 # Positions a random double bridge spans.
 WINDOW = 30
 # Nearest discs a ruin kick may take out with its disc (more than a move looks at).
@@ -1092,7 +1094,7 @@ def improve(
     count = 16
     # The shortest length when the search last made headway, and when.
     headway_len, headway_at = best_len, started
-    while n >= 4 and time.perf_counter() - started < time_limit_s:
+    while n >= MIN_SEARCHED and time.perf_counter() - started < time_limit_s:
         tick = time.perf_counter()
         if best_len < headway_len * (1.0 - _STALL_GAIN):
             headway_len, headway_at = best_len, tick
