@@ -14,6 +14,7 @@ shortest tour it finds that enters every region together with a certified lower 
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass
@@ -328,7 +329,7 @@ def _search_starts(
     rng = np.random.default_rng(seed)
     best_len, best = math.inf, (seq, pts)
     start = (seq, pts)
-    for k in range(1 << 30):
+    for k in itertools.count():
         left = polish_at - time.perf_counter()
         if k > 0 and left < each / 2.0:
             break
