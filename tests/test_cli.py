@@ -563,3 +563,16 @@ def test_ctrl_c_while_planning_is_one_line_and_130(when: str, tmp_path: Path) ->
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     code, err = _interrupt(tmp_path, when, env)
     assert (code, err) == (130, "urpt-gcs: interrupted\n")
+
+
+def test_ctrl_c_still_removes_the_temporary_cache_folder(tmp_path: Path) -> None:
+    """Ctrl-C exits without the interpreter's shutdown; the exit handlers must still run."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    (tmp_path / "cache").write_text("a file where the cache folder would be\n")
+    (tmp_path / "tmp").mkdir()
+    env.update(XDG_CACHE_HOME=str(tmp_path / "cache"), TMPDIR=str(tmp_path / "tmp"))
+    code, err = _interrupt(tmp_path, "3.0", env)
+    assert (code, err) == (130, "urpt-gcs: interrupted\n")
+    assert list((tmp_path / "tmp").iterdir()) == []

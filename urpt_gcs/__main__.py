@@ -7,6 +7,7 @@ traceback. So this module imports nothing heavy until it is inside the guard.
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
 import sys
@@ -45,7 +46,21 @@ def _say_interrupted() -> None:
         sys.stderr.write("urpt-gcs: interrupted\n")
         sys.stderr.flush()
     finally:
-        sys.exit(INTERRUPTED_EXIT)
+        _leave_interrupted()
+
+
+def _leave_interrupted() -> None:
+    # Exit 130 without the interpreter's own shutdown. A Ctrl-C that stopped numba mid-compile
+    # leaves llvmlite objects half built, and collecting them at shutdown can print a traceback
+    # or crash the process (SIGSEGV) after the one line was said. The exit handlers (temporary
+    # folders, worker processes) still run, with further Ctrl-Cs ignored.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        atexit._run_exitfuncs()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(INTERRUPTED_EXIT)
 
 
 def run() -> None:
@@ -57,6 +72,10 @@ def run() -> None:
         from urpt_gcs.cli import main
 
         main()
+    except SystemExit as exc:
+        if exc.code == INTERRUPTED_EXIT:
+            _leave_interrupted()
+        raise
     except KeyboardInterrupt:
         # Imports are not done yet (or click is unwinding): print without click.
         _say_interrupted()
