@@ -17,6 +17,8 @@ from typing import Any
 INTERRUPTED_EXIT = 130  # 128 + SIGINT, what a shell reports for a command Ctrl-C stopped
 REDELIVER_S = 0.05
 
+_interrupted = threading.Event()
+
 
 def _interrupt_again(unraisable: Any, previous: Any = sys.unraisablehook) -> None:
     # Ctrl-C that lands in a callback from C (llvmlite calls Python back while numba compiles)
@@ -28,10 +30,11 @@ def _interrupt_again(unraisable: Any, previous: Any = sys.unraisablehook) -> Non
         again.daemon = True
         again.start()
         return
+    if _interrupted.is_set():
+        # What Ctrl-C broke mid-way (a half-built llvmlite object) failing to clean itself up:
+        # the operator has stopped the run and gets the one line, not this.
+        return
     previous(unraisable)
-
-
-_interrupted = threading.Event()
 
 
 def _on_interrupt(signum: int, frame: Any) -> None:
