@@ -358,10 +358,11 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
 def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
     monkeypatch: pytest.MonkeyPatch, many: bool, depot: tuple[float, float] | None
 ) -> None:
-    """The order search runs from the discrete tour and from random insertion tours: every
-    start holds every disc once with its point inside, the starts differ, and the tour kept
-    enters every disc (by shapely's distance), is as long as its legs and no longer than
-    the shortest tour any of the searches returned."""
+    """The order search runs from the discrete tour, from random insertion tours and from
+    the shortest tour with one area ruined: every start holds every disc once with its point
+    inside, the discrete and insertion starts differ, the area ruins ran, and the tour kept
+    enters every disc (by shapely's distance), is as long as its legs and no longer than the
+    shortest tour any of the searches returned."""
     from urpt_gcs.solvers import disc_tour
     from urpt_gcs.solvers.continuous import _DRIFT, _DRIFT_ABOVE
 
@@ -370,7 +371,8 @@ def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
     discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 4.0, n)])
     regions = RegionSet(discs=discs, depot_xy=depot)
     calls: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
-    real = disc_tour.improve
+    ruined: list[tuple[int, ...]] = []
+    real, real_ruin = disc_tour.improve, disc_tour.region_ruin
 
     def spy(*args):  # type: ignore[no-untyped-def]
         seq, pts, _, anchor, _, _, drift = args
@@ -379,21 +381,29 @@ def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
         calls.append((np.asarray(seq), np.asarray(pts), drift, ring))
         return out
 
+    def spy_ruin(*args):  # type: ignore[no-untyped-def]
+        out = real_ruin(*args)
+        ruined.append(tuple(out[0].tolist()))
+        return out
+
     monkeypatch.setattr(disc_tour, "improve", spy)
+    monkeypatch.setattr(disc_tour, "region_ruin", spy_ruin)
     tour = solve_regions(regions, SolveSettings(time_limit_s=4.0))
     # Without a depot each search holds one stop fixed in its place: two calls a search.
     per_search = 1 if depot is not None else 2
-    assert len(calls) >= 4 * per_search  # the discrete start, insertion starts, the last
-    assert {c[2] for c in calls} == {_DRIFT if many else 0.0}  # many: record-to-record
     firsts = calls[::per_search]
-    orders = set()
+    assert len(firsts) >= 4  # the discrete start, insertion starts, area ruins
+    assert {c[2] for c in calls} == {_DRIFT if many else 0.0}  # many: record-to-record
     for seq, pts, _, _ in firsts:
         # Without a depot the fixed stop's disc is not among those searched.
         assert len(seq) == len(set(seq.tolist())) == (n if depot is not None else n - 1)
         off = np.hypot(*(pts - discs[seq, :2]).T) - discs[seq, 2]
         assert (off <= 1e-9).all()
-        orders.add(tuple(seq.tolist()))
-    assert len(orders) == len(firsts)  # no two starts alike
+    # The area ruins come last, each searched from what the ruin returned.
+    assert len(ruined) >= 1
+    restarts, ruin_starts = firsts[: -len(ruined)], firsts[-len(ruined) :]
+    assert [tuple(s.tolist()) for s, *_ in ruin_starts] == ruined
+    assert len({tuple(s.tolist()) for s, *_ in restarts}) == len(restarts) >= 2  # none alike
     assert sorted(tour.touch_region.tolist()) == list(range(n))
     ring = np.asarray(tour.points_xy if depot is None else np.vstack([depot, tour.points_xy]))
     assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
@@ -401,6 +411,43 @@ def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
     assert tour.length == pytest.approx(float(np.hypot(*np.diff(legs, axis=0).T).sum()), rel=1e-9)
     returned = [float(np.hypot(*np.diff(np.vstack([r, r[:1]]), axis=0).T).sum()) for *_, r in calls]
     assert tour.lower_bound <= tour.length <= min(returned) * (1 + 1e-9)
+
+
+def test_a_region_ruin_puts_back_the_discs_of_one_area() -> None:
+    """The discs taken out are the nearest to one disc's centre, the others keep their order
+    and points, and every disc is back once with its point inside."""
+    from urpt_gcs.solvers.disc_tour import region_ruin
+
+    rng = np.random.default_rng(8)
+    discs = np.column_stack([rng.uniform(0, 100, (90, 2)), rng.uniform(0.5, 6.0, 90)])
+    seq = rng.permutation(np.arange(5, 90))  # some discs not in the tour
+    pts = discs[seq, :2] + 0.3 * discs[seq, 2:] * rng.uniform(-1, 1, (seq.size, 2))
+    depot = np.array([50.0, 50.0])
+    changed = 0
+    for trial in range(20):
+        new_seq, new_pts = region_ruin(seq, pts, discs, depot, 0.2, np.random.default_rng(trial))
+        assert sorted(new_seq.tolist()) == sorted(seq.tolist())
+        assert (np.hypot(*(new_pts - discs[new_seq, :2]).T) <= discs[new_seq, 2]).all()
+        # Those whose points moved are the ones taken out: 20 % of the tour, all nearer some
+        # disc's centre than every disc left in place.
+        where = {d: i for i, d in enumerate(seq.tolist())}
+        moved = [
+            d
+            for d, p in zip(new_seq.tolist(), new_pts, strict=True)
+            if not np.array_equal(p, pts[where[d]])
+        ]
+        kept = [d for d in new_seq.tolist() if d not in set(moved)]
+        assert kept == [d for d in seq.tolist() if d not in set(moved)]  # order kept
+        assert len(moved) <= int(0.2 * seq.size)
+        reach = [np.hypot(*(discs[moved, :2] - discs[c, :2]).T).max() for c in seq.tolist()]
+        near_enough = [
+            c
+            for c, r in zip(seq.tolist(), reach, strict=True)
+            if (np.hypot(*(discs[kept, :2] - discs[c, :2]).T) >= r).all()
+        ]
+        assert near_enough, "no centre has the moved discs as its nearest"
+        changed += new_seq.tolist() != seq.tolist()
+    assert changed >= 10
 
 
 def test_insertion_tours_hold_every_disc_inside_and_differ() -> None:

@@ -930,6 +930,42 @@ def insertion_tour(
     return seq, pts
 
 
+def region_ruin(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    depot_xy: FloatArray,
+    share: float,
+    rng: np.random.Generator,
+) -> tuple[IntArray, FloatArray]:
+    """The tour with the discs of one random area taken out and put back: the ``share`` of
+    its discs nearest a disc drawn at random (by centre, at least 3), inserted again in random
+    order, each at its cheapest place (free where a leg already crosses it).
+
+    A perturbation for the order search bigger than its own kicks: the discs of a whole area
+    are routed afresh while the rest of the tour keeps its shape."""
+    discs = np.ascontiguousarray(np.asarray(discs, dtype=np.float64))
+    depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    seq = np.asarray(seq, dtype=np.int64)
+    n = seq.size
+    count = min(n, max(3, int(share * n)))
+    centre = discs[seq[rng.integers(n)], :2]
+    away = np.hypot(*(discs[seq, :2] - centre).T)
+    out = np.argpartition(away, count - 1)[:count]
+    keep = np.ones(n, dtype=bool)
+    keep[out] = False
+    m = int(keep.sum())
+    new_seq = np.empty(n, dtype=np.int64)
+    new_pts = np.empty((n, 2))
+    new_seq[:m] = seq[keep]
+    new_pts[:m] = np.asarray(pts, dtype=np.float64)[keep]
+    for d in rng.permutation(seq[out]):
+        _insert_cheapest(new_seq, new_pts, discs, ends, m, int(d))
+        m += 1
+    return new_seq, new_pts
+
+
 def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
     """Each disc's ``k`` nearest discs by the gap between them (rims, not centres)."""
     n = len(discs)
