@@ -212,6 +212,8 @@ def _newton_stage(
             i = seq[k]
             ex, ey = x[k, 0] - discs[i, 0], x[k, 1] - discs[i, 1]
             u = discs[i, 2] ** 2 - ex * ex - ey * ey
+            if not u > 0.0:
+                return steps
             g[k, 0] += mu * 2.0 * ex / u
             g[k, 1] += mu * 2.0 * ey / u
             dg[k, 0] += mu * (2.0 / u + 4.0 * ex * ex / (u * u))
@@ -236,6 +238,10 @@ def _newton_stage(
             m00 += ridge
             m11 += ridge
             det = m00 * m11 - m01 * m01
+            if not det > 0.0:
+                # Not positive definite to rounding (stops that coincide, legs that are
+                # straight): no Newton step here; the stage ends where it is.
+                return steps
             i00, i01, i11 = m11 / det, -m01 / det, m00 / det
             rp[k, 0] = i00 * r0 + i01 * r1
             rp[k, 1] = i01 * r0 + i11 * r1
