@@ -413,6 +413,54 @@ def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
     assert tour.lower_bound <= tour.length <= min(returned) * (1 + 1e-9)
 
 
+def test_searches_side_by_side_run_on_two_threads_and_keep_the_shortest(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With two threads the order search runs in two threads at once (their searches
+    overlap in time), and the tour kept enters every disc (by shapely's distance) and is no
+    longer than the shortest tour any of the searches returned."""
+    import threading
+    import time
+
+    from urpt_gcs.solvers import disc_tour
+
+    rng = np.random.default_rng(12)
+    n = 80
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 4.0, n)])
+    depot = np.array([50.0, 50.0])
+    regions = RegionSet(discs=discs, depot_xy=(50.0, 50.0))
+    spans: list[tuple[int, float, float, float]] = []
+    real = disc_tour.improve
+
+    def spy(*args):  # type: ignore[no-untyped-def]
+        began = time.perf_counter()
+        out = real(*args)
+        length = closed_length(out[1], depot)
+        spans.append((threading.get_ident(), began, time.perf_counter(), length))
+        return out
+
+    monkeypatch.setattr(disc_tour, "improve", spy)
+    tour = solve_regions(regions, SolveSettings(time_limit_s=4.0, threads=2))
+    assert len({ident for ident, *_ in spans}) == 2
+    # Some search of one thread ran while one of the other did.
+    overlap = any(a[0] != b[0] and a[1] < b[2] and b[1] < a[2] for a in spans for b in spans)
+    assert overlap
+    assert sorted(tour.touch_region.tolist()) == list(range(n))
+    ring = np.vstack([depot, tour.points_xy])
+    assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
+    assert tour.length <= min(length for *_, length in spans) * (1 + 1e-9)
+
+
+def test_threads_below_one_are_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from urpt_gcs.errors import SettingsError
+
+    with pytest.raises(SettingsError, match="--threads 0"):
+        SolveSettings(threads=0)
+    result = CliRunner().invoke(main, ["bench", "cetsp", str(tmp_path), "--threads", "0"])
+    assert result.exit_code == 2 and "--threads" in result.output
+    assert "Traceback" not in result.output
+
+
 def test_a_region_ruin_puts_back_the_discs_of_one_area() -> None:
     """The discs taken out are the nearest to one disc's centre, the others keep their order
     and points, and every disc is back once with its point inside."""

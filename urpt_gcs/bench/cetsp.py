@@ -200,15 +200,17 @@ def run_cetsp(
     client: Client | None = None,
     min_discs: int | None = None,
     max_discs: int | None = None,
+    threads: int = 1,
 ) -> list[Row]:
     """Solve and bound every instance of ``directory`` (those named in ``only``, with
-    ``min_discs`` to ``max_discs`` discs); write ``results.csv`` to ``out_dir``.
+    ``min_discs`` to ``max_discs`` discs); write ``results.csv`` to ``out_dir``. Each
+    instance's order search runs ``threads`` searches side by side.
 
     With a Dask ``client`` (:func:`urpt_gcs.cluster.open_client`) every instance is a task;
     the rows are the ones a serial run gives (the seed is fixed) but for the times, as far as
     the time limit lets each search go equally far.
     """
-    settings = SolveSettings(time_limit_s=time_limit_s, seed=seed)
+    settings = SolveSettings(time_limit_s=time_limit_s, seed=seed, threads=threads)
     published = read_published(directory)
     say = progress or (lambda _msg: None)
     paths = instance_paths(directory, only, min_discs, max_discs)

@@ -123,6 +123,13 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
     "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the search.")
+@click.option(
+    "--threads",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Order searches per instance run side by side (one core each).",
+)
 @cluster_options
 def bench_cetsp_command(
     directory: Path,
@@ -132,6 +139,7 @@ def bench_cetsp_command(
     max_discs: int | None,
     out: Path | None,
     seed: int,
+    threads: int,
     scheduler: str | None,
     workers: int | None,
 ) -> None:
@@ -151,6 +159,7 @@ def bench_cetsp_command(
                 client=client,
                 min_discs=min_discs,
                 max_discs=max_discs,
+                threads=threads,
             )
     except UrptError as exc:
         fail(exc)

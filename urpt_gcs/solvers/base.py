@@ -25,8 +25,12 @@ class SolveSettings:
 
     time_limit_s: float = 5.0
     seed: int = 0
+    # Threads the continuous order search for discs may run side by side.
+    threads: int = 1
 
     def __post_init__(self) -> None:
+        if self.threads < 1:
+            raise SettingsError(f"--threads {self.threads} must be at least 1")
         if not (math.isfinite(self.time_limit_s) and self.time_limit_s > 0.0):
             raise SettingsError(
                 f"--time-limit {self.time_limit_s} must be a positive number of seconds"

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -203,7 +205,9 @@ def solve_regions(
             best_len, best_seq, best_pts = length, seq, pts
     if with_discs:
         left = solve_budget - (time.perf_counter() - started)
-        seq, pts = _search_starts(regions, best_seq, best_pts, left, settings.seed)
+        seq, pts = _search_starts(
+            regions, best_seq, best_pts, left, settings.seed, settings.threads
+        )
         length = closed_length(pts, regions.depot_xy)
         if length < best_len:
             best_len, best_seq, best_pts = length, seq, pts
@@ -324,42 +328,71 @@ def _search_discs(
 
 
 def _search_starts(
-    regions: RegionSet, seq: IntArray, pts: FloatArray, seconds: float, seed: int
+    regions: RegionSet, seq: IntArray, pts: FloatArray, seconds: float, seed: int, threads: int = 1
 ) -> tuple[IntArray, FloatArray]:
     """The disc tour searched (:func:`_search_discs`) for ``seconds``: from the given tour
     and from insertion tours in turn, then from the shortest found with one area of it
     ruined at a time (:func:`_region_ruin`). The shortest found (never longer than the
-    given tour)."""
+    given tour).
+
+    With ``threads`` above 1 as many searches run side by side (the search's kernels release
+    the GIL), each taking its own starts and ruining the shortest any has found."""
     # Without a depot one stop is held in its place and the others searched.
     if regions.n - (regions.depot_xy is None) < disc_tour.MIN_SEARCHED:
         return _search_discs(regions, seq, pts, seconds, seed)
-    started = time.perf_counter()
+    shared = _Shortest(regions, (seq, pts), time.perf_counter() + seconds)
+    if threads == 1:
+        _search_lane(shared, seconds, seed, 0, 1)
+        return shared.best
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        lanes = range(threads)
+        for run in [pool.submit(_search_lane, shared, seconds, seed, k, threads) for k in lanes]:
+            run.result()
+    return shared.best
+
+
+class _Shortest:
+    """The shortest disc tour the searches have found, shared between their threads."""
+
+    def __init__(self, regions: RegionSet, start: tuple[IntArray, FloatArray], end: float):
+        self.regions = regions
+        self.start = start
+        self.end = end
+        self.best = start
+        self.length = math.inf
+        self._lock = threading.Lock()
+
+    def offer(self, found: tuple[IntArray, FloatArray]) -> None:
+        length = closed_length(found[1], self.regions.depot_xy)
+        with self._lock:
+            if length < self.length:
+                self.length, self.best = length, found
+
+
+def _search_lane(shared: _Shortest, seconds: float, seed: int, lane: int, lanes: int) -> None:
+    """One thread of :func:`_search_starts`: restarts (lane 0 first from the given tour)
+    until the ruin phase, then area ruins of the shortest found."""
+    regions = shared.regions
+    started = shared.end - seconds
     ruin_at = started + seconds * (1.0 - _RUIN_PHASE)
     each = max(min(_RESTART_S, seconds / 4.0), 0.05)
-    rng = np.random.default_rng(seed)
-    best_len, best = math.inf, (seq, pts)
-    start = (seq, pts)
+    rng = np.random.default_rng(seed if lane == 0 else [seed, lane])
+    start = shared.start if lane == 0 else _insertion_start(regions, rng)
     for k in itertools.count():
         left = ruin_at - time.perf_counter()
         if k > 0 and left < each / 2.0:
             break
-        found = _search_discs(regions, *start, min(each, max(left, 0.05)), seed + k)
-        length = closed_length(found[1], regions.depot_xy)
-        if length < best_len:
-            best_len, best = length, found
+        found = _search_discs(regions, *start, min(each, max(left, 0.05)), seed + k * lanes + lane)
+        shared.offer(found)
         start = _insertion_start(regions, rng)
-    end = started + seconds
     each = min(_RUIN_S, each)
     while True:
-        left = end - time.perf_counter()
+        left = shared.end - time.perf_counter()
         if left < each / 2.0:
             break
-        ruined = _region_ruin(regions, *best, rng)
+        ruined = _region_ruin(regions, *shared.best, rng)
         found = _search_discs(regions, *ruined, min(each, left), int(rng.integers(2**31)))
-        length = closed_length(found[1], regions.depot_xy)
-        if length < best_len:
-            best_len, best = length, found
-    return best
+        shared.offer(found)
 
 
 def _region_ruin(
@@ -393,5 +426,7 @@ def _insertion_start(regions: RegionSet, rng: np.random.Generator) -> tuple[IntA
 
 def _share(settings: SolveSettings, seconds: float, seed_offset: int = 0) -> SolveSettings:
     return SolveSettings(
-        time_limit_s=max(seconds, 0.05), seed=(settings.seed + seed_offset) % 2**32
+        time_limit_s=max(seconds, 0.05),
+        seed=(settings.seed + seed_offset) % 2**32,
+        threads=settings.threads,
     )

@@ -74,7 +74,7 @@ _SEARCH_STEPS = 100
 _MIN_GAIN = 1e-9
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _pt(pts: FloatArray, ends: FloatArray, i: int) -> tuple[float, float]:
     # ends[0] before the first stop, ends[1] after the last (both the depot for a tour).
     n = pts.shape[0]
@@ -85,12 +85,12 @@ def _pt(pts: FloatArray, ends: FloatArray, i: int) -> tuple[float, float]:
     return pts[i, 0], pts[i, 1]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _dist(ax: float, ay: float, bx: float, by: float) -> float:
     return math.hypot(ax - bx, ay - by)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def path_length(pts: FloatArray, ends: FloatArray) -> float:
     """Length of ends[0] -> pts[0] -> ... -> pts[n-1] -> ends[1]."""
     n = pts.shape[0]
@@ -102,7 +102,7 @@ def path_length(pts: FloatArray, ends: FloatArray) -> float:
     return total
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _settle(
     seq: IntArray,
     pts: FloatArray,
@@ -138,7 +138,7 @@ def _settle(
     return total
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _barrier_value(
     seq: IntArray, x: FloatArray, discs: FloatArray, ends: FloatArray, mu: float, eps: float
 ) -> float:
@@ -157,7 +157,7 @@ def _barrier_value(
     return f
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _newton_stage(
     seq: IntArray,
     x: FloatArray,
@@ -281,7 +281,7 @@ def _newton_stage(
     return steps
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _exact_kernel(
     seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, steps: int
 ) -> FloatArray:
@@ -343,7 +343,7 @@ def exact_positions(
     return pts
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _exact_window(
     seq: IntArray,
     pts: FloatArray,
@@ -370,7 +370,7 @@ def _exact_window(
             start = k + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _exact_run(
     seq: IntArray,
     pts: FloatArray,
@@ -390,7 +390,7 @@ def _exact_run(
         pts[lo : hi + 1] = x
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _nearest_on_segment(
     cx: float, cy: float, ax: float, ay: float, bx: float, by: float
 ) -> tuple[float, float]:
@@ -400,13 +400,13 @@ def _nearest_on_segment(
     return ax + t * dx, ay + t * dy
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _to_segment(cx: float, cy: float, ax: float, ay: float, bx: float, by: float) -> float:
     qx, qy = _nearest_on_segment(cx, cy, ax, ay, bx, by)
     return _dist(cx, cy, qx, qy)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _insert_cost(
     pts: FloatArray, ends: FloatArray, discs: FloatArray, d: int, j: int
 ) -> tuple[float, float, float]:
@@ -418,7 +418,7 @@ def _insert_cost(
     return _dist(ax, ay, px, py) + _dist(px, py, bx, by) - _dist(ax, ay, bx, by), px, py
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _insert_floor(pts: FloatArray, ends: FloatArray, discs: FloatArray, d: int, j: int) -> float:
     """A lower bound on :func:`_insert_cost`, cheaply: every point ``h`` from the leg
     ``j -> j + 1`` costs at least ``sqrt(leg^2 + 4 h^2) - leg`` (the ellipse through it with
@@ -432,7 +432,7 @@ def _insert_floor(pts: FloatArray, ends: FloatArray, discs: FloatArray, d: int, 
     return math.sqrt(leg * leg + 4.0 * h * h) - leg
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _move_stop(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> int:
     """Move the stop at ``i`` to just after position ``j`` (positions before the move); its
     new position."""
@@ -459,7 +459,7 @@ def _move_stop(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) ->
     return new
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _reverse(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> None:
     while i < j:
         seq[i], seq[j] = seq[j], seq[i]
@@ -472,7 +472,7 @@ def _reverse(seq: IntArray, pts: FloatArray, pos: IntArray, i: int, j: int) -> N
         j -= 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _or_opt(
     seq: IntArray,
     pts: FloatArray,
@@ -551,7 +551,7 @@ def _or_opt(
     return min(lo, gap) - 3, max(hi, gap) + 3
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _wake(
     seq: IntArray, active: BoolArray, queue: IntArray, head: int, size: int, lo: int, hi: int
 ) -> int:
@@ -566,7 +566,7 @@ def _wake(
     return size
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _descend(
     seq: IntArray,
     pts: FloatArray,
@@ -588,7 +588,7 @@ def _descend(
     return _search(seq, pts, pos, discs, ends, neigh, active, queue, size, tol)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _search(
     seq: IntArray,
     pts: FloatArray,
@@ -701,7 +701,7 @@ def _search(
     return first, last
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int) -> None:
     """A double bridge: the stops ``a..b-1`` and ``b..c-1`` swap places."""
     old_seq = seq[a:c].copy()
@@ -721,7 +721,7 @@ def _kick(seq: IntArray, pts: FloatArray, pos: IntArray, a: int, b: int, c: int)
         pos[seq[k]] = k
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _move_depot(
     seq: IntArray,
     pts: FloatArray,
@@ -763,7 +763,7 @@ def _move_depot(
     return n - k
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _put_at(seq: IntArray, pts: FloatArray, m: int, at: int, d: int, x: float, y: float) -> None:
     """Disc ``d`` at position ``at`` of the tour of the first ``m`` stops, point ``(x, y)``;
     the stops from ``at`` on shift one along."""
@@ -776,7 +776,7 @@ def _put_at(seq: IntArray, pts: FloatArray, m: int, at: int, d: int, x: float, y
     pts[at, 1] = y
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _insert_cheapest(
     seq: IntArray, pts: FloatArray, discs: FloatArray, ends: FloatArray, m: int, d: int
 ) -> int:
@@ -805,7 +805,7 @@ def _insert_cheapest(
     return best_j + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _insert_near(
     seq: IntArray,
     pts: FloatArray,
@@ -838,7 +838,7 @@ def _insert_near(
         pos[seq[k]] = k
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _ruin(
     seq: IntArray,
     pts: FloatArray,
@@ -866,7 +866,7 @@ def _ruin(
         m += 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _strip(
     seq: IntArray, pts: FloatArray, pos: IntArray, ends: FloatArray, tol: float
 ) -> tuple[int, IntArray]:
@@ -897,7 +897,7 @@ def _strip(
     return m, taken[:t].copy()
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _put_back(
     seq: IntArray,
     pts: FloatArray,
@@ -999,7 +999,7 @@ def _among(discs: FloatArray, kept: IntArray, k: int = NEIGHBOURS) -> IntArray:
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _kicks(
     seq: IntArray,
     pts: FloatArray,
@@ -1058,7 +1058,7 @@ def _kicks(
     return rec_len
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _keep_or_undo(
     seq: IntArray,
     pts: FloatArray,
@@ -1212,7 +1212,7 @@ def _escape(
     return best_len
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _descent(
     seq: IntArray,
     pts: FloatArray,

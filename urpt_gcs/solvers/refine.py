@@ -31,12 +31,12 @@ _POLYGON_SAMPLES = 64
 Accept = Callable[[int, FloatArray], bool]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _legs(ax: float, ay: float, px: float, py: float, bx: float, by: float) -> float:
     return math.hypot(px - ax, py - ay) + math.hypot(bx - px, by - py)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _slope(
     ax: float, ay: float, bx: float, by: float, cx: float, cy: float, r: float, th: float
 ) -> tuple[float, float]:
@@ -56,7 +56,7 @@ def _slope(
     return du + dv, ddu + ddv
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def best_on_disc(
     ax: float, ay: float, bx: float, by: float, cx: float, cy: float, r: float
 ) -> tuple[float, float]:
@@ -107,7 +107,7 @@ def best_on_disc(
     return cx + r * math.cos(th), cy + r * math.sin(th)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _sweep_discs(
     seq: IntArray,
     pts: FloatArray,
