@@ -340,24 +340,33 @@ def _search_starts(
     # Without a depot one stop is held in its place and the others searched.
     if regions.n - (regions.depot_xy is None) < disc_tour.MIN_SEARCHED:
         return _search_discs(regions, seq, pts, seconds, seed)
-    shared = _Shortest(regions, (seq, pts), time.perf_counter() + seconds)
+    shared = _Shortest(regions, (seq, pts), seconds)
     if threads == 1:
-        _search_lane(shared, seconds, seed, 0, 1)
+        _search_lane(shared, seed, 0, 1)
         return shared.best
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        lanes = range(threads)
-        for run in [pool.submit(_search_lane, shared, seconds, seed, k, threads) for k in lanes]:
-            run.result()
+        runs = [pool.submit(_search_lane, shared, seed, k, threads) for k in range(threads)]
+        try:
+            for run in runs:
+                run.result()
+        except BaseException:
+            # Interrupted (Ctrl-C) or failed: the other lanes stop after their current search.
+            shared.end = -math.inf
+            raise
     return shared.best
 
 
 class _Shortest:
-    """The shortest disc tour the searches have found, shared between their threads."""
+    """The shortest disc tour the searches have found, shared between their threads, and
+    when their restarts and their whole search end."""
 
-    def __init__(self, regions: RegionSet, start: tuple[IntArray, FloatArray], end: float):
+    def __init__(self, regions: RegionSet, start: tuple[IntArray, FloatArray], seconds: float):
         self.regions = regions
         self.start = start
-        self.end = end
+        started = time.perf_counter()
+        self.ruin_at = started + seconds * (1.0 - _RUIN_PHASE)
+        self.end = started + seconds
+        self.each = max(min(_RESTART_S, seconds / 4.0), 0.05)
         self.best = start
         self.length = math.inf
         self._lock = threading.Lock()
@@ -369,17 +378,15 @@ class _Shortest:
                 self.length, self.best = length, found
 
 
-def _search_lane(shared: _Shortest, seconds: float, seed: int, lane: int, lanes: int) -> None:
+def _search_lane(shared: _Shortest, seed: int, lane: int, lanes: int) -> None:
     """One thread of :func:`_search_starts`: restarts (lane 0 first from the given tour)
     until the ruin phase, then area ruins of the shortest found."""
     regions = shared.regions
-    started = shared.end - seconds
-    ruin_at = started + seconds * (1.0 - _RUIN_PHASE)
-    each = max(min(_RESTART_S, seconds / 4.0), 0.05)
+    each = shared.each
     rng = np.random.default_rng(seed if lane == 0 else [seed, lane])
     start = shared.start if lane == 0 else _insertion_start(regions, rng)
     for k in itertools.count():
-        left = ruin_at - time.perf_counter()
+        left = min(shared.ruin_at, shared.end) - time.perf_counter()
         if k > 0 and left < each / 2.0:
             break
         found = _search_discs(regions, *start, min(each, max(left, 0.05)), seed + k * lanes + lane)
