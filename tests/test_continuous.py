@@ -358,12 +358,13 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
 def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
     monkeypatch: pytest.MonkeyPatch, many: bool, depot: tuple[float, float] | None
 ) -> None:
-    """The order search runs from the discrete tour, from random insertion tours and from
-    the shortest tour with one area ruined: every start holds every disc once with its point
-    inside, the discrete and insertion starts differ, the area ruins ran, and the tour kept
-    enters every disc (by shapely's distance), is as long as its legs and no longer than the
-    shortest tour any of the searches returned."""
-    from urpt_gcs.solvers import disc_tour
+    """The order search runs from the discrete tour, from other starts (above 200 discs
+    random insertion tours, up to 200 discrete solves with fresh seeds) and from the
+    shortest tour ruined (an area, or around a depot on few discs the depot moved): every
+    start holds every disc once with its point inside, the starts differ, the ruins ran, and
+    the tour kept enters every disc (by shapely's distance), is as long as its legs and no
+    longer than the shortest tour any of the searches returned."""
+    from urpt_gcs.solvers import continuous, disc_tour
     from urpt_gcs.solvers.continuous import _DRIFT, _DRIFT_ABOVE
 
     rng = np.random.default_rng(11)
@@ -386,24 +387,44 @@ def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
         ruined.append(tuple(out[0].tolist()))
         return out
 
+    real_moved, real_solve = disc_tour.depot_moved, continuous.solve
+    moved: list[tuple[int, ...]] = []
+
+    def spy_moved(*args):  # type: ignore[no-untyped-def]
+        out = real_moved(*args)
+        ruined.append(tuple(out[0].tolist()))
+        moved.append(ruined[-1])
+        return out
+
+    seeds: list[int] = []
+
+    def spy_solve(instance, name, settings):  # type: ignore[no-untyped-def]
+        seeds.append(settings.seed)
+        return real_solve(instance, name, settings)
+
     monkeypatch.setattr(disc_tour, "improve", spy)
     monkeypatch.setattr(disc_tour, "region_ruin", spy_ruin)
-    tour = solve_regions(regions, SolveSettings(time_limit_s=4.0))
+    monkeypatch.setattr(disc_tour, "depot_moved", spy_moved)
+    monkeypatch.setattr(continuous, "solve", spy_solve)
+    tour = solve_regions(regions, SolveSettings(time_limit_s=6.0))
     # Without a depot each search holds one stop fixed in its place: two calls a search.
     per_search = 1 if depot is not None else 2
     firsts = calls[::per_search]
-    assert len(firsts) >= 4  # the discrete start, insertion starts, area ruins
+    assert len(firsts) >= 3  # the discrete start, other starts, ruins
     assert {c[2] for c in calls} == {_DRIFT if many else 0.0}  # many: record-to-record
     for seq, pts, _, _ in firsts:
         # Without a depot the fixed stop's disc is not among those searched.
         assert len(seq) == len(set(seq.tolist())) == (n if depot is not None else n - 1)
         off = np.hypot(*(pts - discs[seq, :2]).T) - discs[seq, 2]
         assert (off <= 1e-9).all()
-    # The area ruins come last, each searched from what the ruin returned.
+    # The ruins come last, each searched from what the ruin returned.
     assert len(ruined) >= 1
     restarts, ruin_starts = firsts[: -len(ruined)], firsts[-len(ruined) :]
     assert [tuple(s.tolist()) for s, *_ in ruin_starts] == ruined
     assert len({tuple(s.tolist()) for s, *_ in restarts}) == len(restarts) >= 2  # none alike
+    # Up to 200 discs every restart after the first is a discrete solve of its own seed.
+    assert len(seeds) == (1 if many else len(restarts)) == len(set(seeds))
+    assert (len(moved) > 0) == (not many and depot is not None)
     assert sorted(tour.touch_region.tolist()) == list(range(n))
     ring = np.asarray(tour.points_xy if depot is None else np.vstack([depot, tour.points_xy]))
     assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
@@ -496,6 +517,43 @@ def test_a_region_ruin_puts_back_the_discs_of_one_area() -> None:
         assert near_enough, "no centre has the moved discs as its nearest"
         changed += new_seq.tolist() != seq.tolist()
     assert changed >= 10
+
+
+def test_a_depot_move_joins_the_depot_to_a_far_leg_of_the_same_cycle() -> None:
+    """Around a ring of discs the tour's cycle stays the same (a rotation of the order), the
+    depot joins it at least 10 stops from where it did, the stops stay inside their discs
+    and only those next to the old and the new joins move; the length is the ring's plus
+    the new join's two legs, by an independent sum."""
+    from urpt_gcs.solvers.disc_tour import depot_moved
+
+    n = 48
+    angle = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    rng = np.random.default_rng(3)
+    radius = 40.0 + rng.uniform(-3.0, 3.0, n)
+    discs = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(n, 2.0)])
+    depot = np.array([0.0, 0.0])
+    seq = np.arange(n)
+    pts = discs[:, :2] * (1.0 - 1.0 / radius)[:, None]  # 1 m inward of each centre
+    rotations = set()
+    for trial in range(10):
+        new_seq, new_pts = depot_moved(seq, pts, discs, depot, np.random.default_rng(trial))
+        k = int(new_seq[0])
+        assert new_seq.tolist() == np.roll(seq, -k).tolist()
+        assert 10 <= k <= n - 10
+        rotations.add(k)
+        off = np.hypot(*(new_pts - discs[new_seq, :2]).T) - discs[new_seq, 2]
+        assert (off <= 0.0).all()
+        # Moved: up to three stops either side of the new join, two either side of the old.
+        moved = set(np.flatnonzero(np.any(new_pts != pts[new_seq], axis=1)).tolist())
+        old_join = n - k
+        assert moved <= {0, 1, 2, n - 3, n - 2, n - 1, *range(old_join - 2, old_join + 2)}
+        ring = np.vstack([new_pts, new_pts[:1]])
+        legs = np.hypot(*np.diff(ring, axis=0).T)
+        tour = np.vstack([depot, new_pts, depot])
+        length = float(np.hypot(*np.diff(tour, axis=0).T).sum())
+        joins = np.hypot(*(new_pts[[0, -1]] - depot).T).sum()
+        assert length == pytest.approx(legs.sum() - legs[-1] + joins, rel=1e-12)
+    assert len(rotations) >= 2  # the leg is drawn among the cheapest
 
 
 def test_insertion_tours_hold_every_disc_inside_and_differ() -> None:

@@ -34,7 +34,7 @@ Q_KMAX, Q_STALL, Q_RESTARTS, Q_MOVES, Q_HORIZON = 0, 1, 2, 3, 4
 N_REMOVALS, N_INSERTIONS = 4, 3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def insert_clusters(P, t, n, pos, rem, k, mode, noise, rng):  # type: ignore[no-untyped-def]
     """Insert the clusters ``rem[:k]`` into the partial tour ``t[:n]``; return the new length.
 
@@ -102,7 +102,7 @@ def insert_clusters(P, t, n, pos, rem, k, mode, noise, rng):  # type: ignore[no-
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def remove_clusters(P, t, m, pos, k, method, power, rem, rng):  # type: ignore[no-untyped-def]
     """Remove ``k`` clusters from ``t[:m]`` into ``rem``; return the new length.
 
@@ -153,7 +153,7 @@ def remove_clusters(P, t, m, pos, k, method, power, rem, rng):  # type: ignore[n
     return w
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _roulette(weights, lo, hi, rng):  # type: ignore[no-untyped-def]
     """Index in ``lo:hi`` (counted from ``lo``) drawn with probability proportional to weight."""
     x = rng.random() * weights[lo:hi].sum()
@@ -164,7 +164,7 @@ def _roulette(weights, lo, hi, rng):  # type: ignore[no-untyped-def]
     return hi - 1 - lo
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rebuild(P, t, m, moves, W, Q, rng):  # type: ignore[no-untyped-def]
     """A fresh tour: every cluster inserted in random order, then local search; its cost."""
     cl = P[4]
@@ -178,7 +178,7 @@ def rebuild(P, t, m, moves, W, Q, rng):  # type: ignore[no-untyped-def]
     return local_search(P, t, m, moves, W, Q)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def queue_all(P, t, m, W, Q):  # type: ignore[no-untyped-def]
     """Queue every cluster of ``t[:m]`` for the local search."""
     cl = P[4]
@@ -188,7 +188,7 @@ def queue_all(P, t, m, W, Q):  # type: ignore[no-untyped-def]
         push_around(Q, t, cl, m, pos[c])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lns_chunk(P, tours, sf, si, pf, pi, weights, W, Q, rng, n_iter):  # type: ignore[no-untyped-def]
     """Run up to ``n_iter`` iterations of one trial; return True once the trial has ended.
 
@@ -237,7 +237,7 @@ def lns_chunk(P, tours, sf, si, pf, pi, weights, W, Q, rng, n_iter):  # type: ig
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def recombine(P, best, elite, n_children, moves, W, Q, rng, child):  # type: ignore[no-untyped-def]
     """Cross ``best`` with the tours ``elite`` ``n_children`` times; keep improvements in place.
 

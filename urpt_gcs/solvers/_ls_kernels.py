@@ -35,7 +35,7 @@ DP_WORK_CAP = 300_000_000
 _DESCENT_SWEEPS = 4
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dist(P, u, v):  # type: ignore[no-untyped-def]
     """The cost of ``u -> v``: from the matrix, or Euclidean between the node positions."""
     xy = P[2]
@@ -46,7 +46,7 @@ def dist(P, u, v):  # type: ignore[no-untyped-def]
     return np.sqrt(dx * dx + dy * dy)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dtr(P, u, v):  # type: ignore[no-untyped-def]
     """The cost of ``v -> u``, read from the transposed matrix so that a loop over ``v``
     reads a row."""
@@ -58,7 +58,7 @@ def dtr(P, u, v):  # type: ignore[no-untyped-def]
     return np.sqrt(dx * dx + dy * dy)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cycle_cost(P, t, n):  # type: ignore[no-untyped-def]
     if n < 2:
         return dist(P, t[0], t[0]) if n == 1 else 0.0
@@ -68,14 +68,14 @@ def cycle_cost(P, t, n):  # type: ignore[no-untyped-def]
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def set_positions(t, pos, cl, n):  # type: ignore[no-untyped-def]
     pos[:] = -1
     for i in range(n):
         pos[cl[t[i]]] = i
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def insert_at(t, pos, cl, n, i, v):  # type: ignore[no-untyped-def]
     for j in range(n, i, -1):
         t[j] = t[j - 1]
@@ -84,7 +84,7 @@ def insert_at(t, pos, cl, n, i, v):  # type: ignore[no-untyped-def]
     pos[cl[v]] = i
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def remove_at(t, pos, cl, n, i):  # type: ignore[no-untyped-def]
     pos[cl[t[i]]] = -1
     for j in range(i, n - 1):
@@ -92,12 +92,12 @@ def remove_at(t, pos, cl, n, i):  # type: ignore[no-untyped-def]
         pos[cl[t[j]]] = j
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _wrap(i, m):  # type: ignore[no-untyped-def]
     return i - m if i >= m else i
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def push(Q, c):  # type: ignore[no-untyped-def]
     stack, queued, top = Q
     if not queued[c]:
@@ -106,7 +106,7 @@ def push(Q, c):  # type: ignore[no-untyped-def]
         top[0] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def push_around(Q, t, cl, n, i):  # type: ignore[no-untyped-def]
     """Queue the cluster at index ``i`` of ``t[:n]`` and its two tour neighbours."""
     push(Q, cl[t[i]])
@@ -114,7 +114,7 @@ def push_around(Q, t, cl, n, i):  # type: ignore[no-untyped-def]
     push(Q, cl[t[i + 1 if i + 1 < n else 0]])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def best_insertion(P, t, n, pos, c):  # type: ignore[no-untyped-def]
     """Cheapest node of cluster ``c`` and place in ``t[:n]``: (cost, node, index to insert at).
 
@@ -158,7 +158,7 @@ def best_insertion(P, t, n, pos, c):  # type: ignore[no-untyped-def]
     return best, best_v, best_i
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def descend_nodes(P, t, m, Q):  # type: ignore[no-untyped-def]
     """Re-choose each cluster's node, one at a time, as the cheapest between its neighbours'
     current nodes; sweep until nothing changes (or ``_DESCENT_SWEEPS`` sweeps). Changed
@@ -185,7 +185,7 @@ def descend_nodes(P, t, m, Q):  # type: ignore[no-untyped-def]
     return cycle_cost(P, t, m)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def reopt_nodes(P, t, m, pos, best_cost, Q):  # type: ignore[no-untyped-def]
     """Best node per cluster for the cluster order of ``t[:m]`` (exact); rewrite ``t`` if shorter.
 
@@ -249,7 +249,7 @@ def reopt_nodes(P, t, m, pos, best_cost, Q):  # type: ignore[no-untyped-def]
     return best_cost
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _try_move(P, t, m, pos, c, Q):  # type: ignore[no-untyped-def]
     """Take cluster ``c`` out and put it back at its cheapest place with its cheapest node.
 
@@ -302,7 +302,7 @@ def _try_move(P, t, m, pos, c, Q):  # type: ignore[no-untyped-def]
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _try_two_opt(P, t, m, pos, c, sym, fw, bw, Q):  # type: ignore[no-untyped-def]
     """2-opt moves that join cluster ``c`` to one of its nearest clusters.
 
@@ -344,7 +344,7 @@ def _try_two_opt(P, t, m, pos, c, sym, fw, bw, Q):  # type: ignore[no-untyped-de
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _try_or_opt(P, t, m, pos, c, buf, Q):  # type: ignore[no-untyped-def]
     """Move the 2 or 3 clusters starting at ``c`` next to a cluster near its ends, either way."""
     _, _, _, _, cl, nbr, _, kn = P
@@ -404,7 +404,7 @@ def _try_or_opt(P, t, m, pos, c, buf, Q):  # type: ignore[no-untyped-def]
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def local_search(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
     """Improve ``t[:m]`` around the queued clusters, then re-choose all nodes exactly; repeat.
 
@@ -416,7 +416,7 @@ def local_search(P, t, m, moves, W, Q):  # type: ignore[no-untyped-def]
     return local_search_for(P, t, m, moves, W, Q, -1)[0]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def local_search_for(P, t, m, moves, W, Q, budget):  # type: ignore[no-untyped-def]
     """:func:`local_search` that stops after ``budget`` queued clusters (-1: none), so that a
     caller can read the clock between calls; the tour is whole at every stop. Returns the

@@ -7,8 +7,9 @@ shortest tour it finds that enters every region together with a certified lower 
 1. discretise: candidate points on every region's boundary (and one inside), each covering
    every region it lies in -- a generalized TSP (:class:`urpt_gcs.gtsp.Instance`);
 2. solve it with the GTSP solvers (:mod:`urpt_gcs.solvers`);
-3. refine the tour continuously with the order fixed (:mod:`urpt_gcs.solvers.refine`), then
-   solve again with the refined points among the candidates, and refine again;
+3. refine the tour continuously with the order fixed (:mod:`urpt_gcs.solvers.refine`); for
+   polygons, solve again with the refined points among the candidates and refine again;
+   for discs, search the order continuously from many starts (:func:`_search_starts`);
 4. bound it (:mod:`urpt_gcs.solvers.bound`).
 """
 
@@ -41,34 +42,44 @@ _MIN_DISC_SAMPLES = 4
 _BOUND_SHARE = 0.3
 # Re-solves after the first solve (polygons).
 _ROUNDS = 3
-# For discs: re-solves, and the share of the solve time for the discrete solves; the
-# continuous order search (:mod:`urpt_gcs.solvers.disc_tour`) has the rest.
-_DISC_ROUNDS = 2
-_DISC_DISCRETE_SHARE = 0.5
+# For discs: the share of the solve time for the one discrete solve; the continuous order
+# search (:mod:`urpt_gcs.solvers.disc_tour`) has the rest.
+_DISC_DISCRETE_SHARE = 0.15
 # Above this many discs the order search keeps kicked tours up to _DRIFT longer than the
 # shortest it met (record-to-record): from one start, strict descent stalls there.
 _DRIFT_ABOVE = 200
 _DRIFT = 0.002
-# The order search runs from many starts: the discrete tour, then tours of the discs
-# inserted in random order (:func:`disc_tour.insertion_tour`), about _RESTART_S seconds
-# each. (The search from one start settles within seconds into one global shape: at 60 s
-# pcb442_or10 stayed 3.2 % above its best known, while the best of ten 3 s searches from
-# insertion tours was 1.0 %.) For the last _RUIN_PHASE of its time the shortest tour is
-# ruined by area (:func:`disc_tour.region_ruin`, _REGION_SHARE of the discs) and searched
-# about _RUIN_S seconds, the result kept if shorter: the shape is right there and parts of
-# it are rebuilt (bubbles9: 5.9 % above its best known -> 4.5 % in 30 s, where restarts do
-# not help). (Searches of 0.5 s after each ruin did better from saved tours of bubbles8 and
-# bubbles9, but over the 37 classic instances above 200 discs at 60 s the sum above the
-# best known was 20.5 points against 20.4, and up to 200 discs, with 0.3 of the solve time
-# for the discrete solves, two instances ended above 0.05 % where one had.) Above
-# _ONE_SOLVE_ABOVE discs one discrete solve gets _MANY_DISCRETE_SHARE of the solve time:
-# the insertion starts serve better than more discrete rounds.
+# The order search runs from many starts: the discrete tour, then other starts, about
+# _RESTART_S seconds each. (The search from one start settles within seconds into one
+# global shape: at 60 s pcb442_or10 stayed 3.2 % above its best known, while the best of ten
+# 3 s searches from insertion tours was 1.0 %.) For the last _RUIN_PHASE of its time the
+# shortest tour is ruined by area (:func:`disc_tour.region_ruin`, _REGION_SHARE of the
+# discs) and searched about _RUIN_S seconds, the result kept if shorter: the shape is right
+# there and parts of it are rebuilt (bubbles9: 5.9 % above its best known -> 4.5 % in 30 s,
+# where restarts do not help). (Searches of 0.5 s after each ruin did better from saved
+# tours of bubbles8 and bubbles9, but over the 37 classic instances above 200 discs at 60 s
+# the sum above the best known was 20.5 points against 20.4.)
 _RESTART_S = 3.0
 _RUIN_PHASE = 0.4
 _RUIN_S = 2.0
 _REGION_SHARE = 0.12
-_ONE_SOLVE_ABOVE = _DRIFT_ABOVE
-_MANY_DISCRETE_SHARE = 0.15
+# Up to _DISCRETE_STARTS_UP_TO discs a restart starts from a discrete solve of the
+# candidates with a fresh seed, given _DISCRETE_START of the restart's time; above, from a
+# tour of the discs inserted in random order (:func:`disc_tour.insertion_tour`). The
+# discrete solver reaches other global shapes than insertion and the order search do: on
+# suri_CETSP-150-5_r1.0, whose best known has an inner loop that area ruins of the outer
+# shape never build, 3 of 12 such restarts (1 s solve, 2 s search) ended at the best known,
+# 1 of 10 from insertion tours (3 s search), and one 7 s discrete solve 2 seeds of 6. (So the
+# time that went to two more discrete solves with extra candidates around the refined
+# tour now goes to restarts: at 60 s, 4 of 4 seeds reach the best known, against 2 of 4.)
+_DISCRETE_STARTS_UP_TO = _DRIFT_ABOVE
+_DISCRETE_START = 1.0 / 3.0
+# Up to _DISCRETE_STARTS_UP_TO discs around a depot, one ruin in _DEPOT_MOVE_EVERY (the
+# first of each thread's) moves the depot to another leg instead (:func:`disc_tour.depot_moved`;
+# the search's own moves do not, and its escape needs longer searches than these). On
+# bubbles4 (184 discs, a ring around the depot) four seeds ended 0.035-0.048 % above its
+# best known with depot moves among the ruins, 0.015-0.089 % without.
+_DEPOT_MOVE_EVERY = 2
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
@@ -180,9 +191,8 @@ def solve_regions(
     base_xy, _ = regions.samples(samples)
     instance = regions.instance(base_xy)
     with_discs = regions.discs is not None
-    many = with_discs and regions.n > _ONE_SOLVE_ABOVE
-    rounds = (0 if many else _DISC_ROUNDS) if with_discs else _ROUNDS
-    share = (_MANY_DISCRETE_SHARE if many else _DISC_DISCRETE_SHARE) if with_discs else 1.0
+    rounds = 0 if with_discs else _ROUNDS
+    share = _DISC_DISCRETE_SHARE if with_discs else 1.0
     discrete_budget = solve_budget * share
     first = solve(instance, solver, _share(settings, discrete_budget / (rounds + 1)))
     discrete = first.length
@@ -206,7 +216,13 @@ def solve_regions(
     if with_discs:
         left = solve_budget - (time.perf_counter() - started)
         seq, pts = _search_starts(
-            regions, best_seq, best_pts, left, settings.seed, settings.threads
+            regions,
+            best_seq,
+            best_pts,
+            left,
+            settings.seed,
+            settings.threads,
+            instance if regions.n <= _DISCRETE_STARTS_UP_TO else None,
         )
         length = closed_length(pts, regions.depot_xy)
         if length < best_len:
@@ -328,19 +344,27 @@ def _search_discs(
 
 
 def _search_starts(
-    regions: RegionSet, seq: IntArray, pts: FloatArray, seconds: float, seed: int, threads: int = 1
+    regions: RegionSet,
+    seq: IntArray,
+    pts: FloatArray,
+    seconds: float,
+    seed: int,
+    threads: int = 1,
+    instance: Instance | None = None,
 ) -> tuple[IntArray, FloatArray]:
     """The disc tour searched (:func:`_search_discs`) for ``seconds``: from the given tour
-    and from insertion tours in turn, then from the shortest found with one area of it
-    ruined at a time (:func:`_region_ruin`). The shortest found (never longer than the
-    given tour).
+    and from other starts in turn: discrete solves of ``instance`` (the candidates of the
+    discrete problem) with fresh seeds where it is given, else insertion tours. Then from
+    the shortest found with one area of it ruined at a time (:func:`_region_ruin`) or, on
+    few discs around a depot, also with the depot moved (:func:`_depot_moved`). The
+    shortest found (never longer than the given tour).
 
     With ``threads`` above 1 as many searches run side by side (the search's kernels release
     the GIL), each taking its own starts and ruining the shortest any has found."""
     # Without a depot one stop is held in its place and the others searched.
     if regions.n - (regions.depot_xy is None) < disc_tour.MIN_SEARCHED:
         return _search_discs(regions, seq, pts, seconds, seed)
-    shared = _Shortest(regions, (seq, pts), seconds)
+    shared = _Shortest(regions, (seq, pts), seconds, instance)
     if threads == 1:
         _search_lane(shared, seed, 0, 1)
         return shared.best
@@ -360,8 +384,17 @@ class _Shortest:
     """The shortest disc tour the searches have found, shared between their threads, and
     when their restarts and their whole search end."""
 
-    def __init__(self, regions: RegionSet, start: tuple[IntArray, FloatArray], seconds: float):
+    def __init__(
+        self,
+        regions: RegionSet,
+        start: tuple[IntArray, FloatArray],
+        seconds: float,
+        instance: Instance | None = None,
+    ):
         self.regions = regions
+        self.instance = instance
+        # Depot moves among the ruins (:func:`disc_tour.depot_moved`).
+        self.depot_moves = regions.depot_xy is not None and regions.n <= _DISCRETE_STARTS_UP_TO
         self.start = start
         started = time.perf_counter()
         self.ruin_at = started + seconds * (1.0 - _RUIN_PHASE)
@@ -380,26 +413,49 @@ class _Shortest:
 
 def _search_lane(shared: _Shortest, seed: int, lane: int, lanes: int) -> None:
     """One thread of :func:`_search_starts`: restarts (lane 0 first from the given tour)
-    until the ruin phase, then area ruins of the shortest found."""
+    until the ruin phase, then ruins of the shortest found. A restart starts from a
+    discrete solve where there are candidates, from an insertion tour otherwise; a ruin
+    moves the depot (where that is on) or rebuilds an area."""
     regions = shared.regions
     each = shared.each
     rng = np.random.default_rng(seed if lane == 0 else [seed, lane])
-    start = shared.start if lane == 0 else _insertion_start(regions, rng)
     for k in itertools.count():
         left = min(shared.ruin_at, shared.end) - time.perf_counter()
         if k > 0 and left < each / 2.0:
             break
-        found = _search_discs(regions, *start, min(each, max(left, 0.05)), seed + k * lanes + lane)
+        r = k * lanes + lane
+        seconds = min(each, max(left, 0.05))
+        if r == 0:
+            start = shared.start
+        elif shared.instance is not None:
+            took = time.perf_counter()
+            start = _discrete_start(regions, shared.instance, seconds * _DISCRETE_START, rng)
+            seconds = max(seconds - (time.perf_counter() - took), 0.05)
+        else:
+            start = _insertion_start(regions, rng)
+        found = _search_discs(regions, *start, seconds, seed + r)
         shared.offer(found)
-        start = _insertion_start(regions, rng)
     each = min(_RUIN_S, each)
-    while True:
+    for k in itertools.count():
         left = shared.end - time.perf_counter()
         if left < each / 2.0:
             break
-        ruined = _region_ruin(regions, *shared.best, rng)
+        if shared.depot_moves and k % _DEPOT_MOVE_EVERY == 0:
+            ruined = _depot_moved(regions, *shared.best, rng)
+        else:
+            ruined = _region_ruin(regions, *shared.best, rng)
         found = _search_discs(regions, *ruined, min(each, left), int(rng.integers(2**31)))
         shared.offer(found)
+
+
+def _discrete_start(
+    regions: RegionSet, instance: Instance, seconds: float, rng: np.random.Generator
+) -> tuple[IntArray, FloatArray]:
+    """The refined touches of a heuristic solve of the candidates, with a fresh seed."""
+    settings = SolveSettings(time_limit_s=max(seconds, 0.05), seed=int(rng.integers(2**31)))
+    tour = solve(instance, "heuristic", settings)
+    seq, pts = touches(instance, tour)
+    return seq, _refine(regions, seq, pts)
 
 
 def _region_ruin(
@@ -415,6 +471,15 @@ def _region_ruin(
         seq[1:], pts[1:], regions.discs, pts[0], _REGION_SHARE, rng
     )
     return np.concatenate([seq[:1], rest_seq]), np.vstack([pts[:1], rest_pts])
+
+
+def _depot_moved(
+    regions: RegionSet, seq: IntArray, pts: FloatArray, rng: np.random.Generator
+) -> tuple[IntArray, FloatArray]:
+    """The tour with its depot moved to another leg (:func:`disc_tour.depot_moved`)."""
+    assert regions.discs is not None and regions.depot_xy is not None
+    depot = np.asarray(regions.depot_xy, dtype=np.float64)
+    return disc_tour.depot_moved(seq, pts, regions.discs, depot, rng)
 
 
 def _insertion_start(regions: RegionSet, rng: np.random.Generator) -> tuple[IntArray, FloatArray]:

@@ -972,6 +972,34 @@ def region_ruin(
     return new_seq, new_pts
 
 
+def depot_moved(
+    seq: IntArray,
+    pts: FloatArray,
+    discs: FloatArray,
+    depot_xy: FloatArray,
+    rng: np.random.Generator,
+) -> tuple[IntArray, FloatArray]:
+    """The tour with the depot moved to another leg far along it (:func:`_move_depot`),
+    the stops either side of both joins re-settled; the tour unchanged where it is too
+    short for a far leg.
+
+    A perturbation the order search's own moves do not make: on a ring of discs the side
+    the depot joins decides which detours the tour can save (bubbles4)."""
+    discs = np.ascontiguousarray(np.asarray(discs, dtype=np.float64))
+    depot = np.asarray(depot_xy, dtype=np.float64).reshape(2)
+    ends = np.ascontiguousarray(np.vstack([depot, depot]))
+    seq = np.array(seq, dtype=np.int64)
+    pts = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    n = seq.size
+    pos = np.empty(discs.shape[0], dtype=np.int64)
+    pos[seq] = np.arange(n)
+    at = _move_depot(seq, pts, pos, ends, rng, min(_DEPOT_AWAY, n // 4))
+    if at >= 0:
+        for lo, hi in ((-1, 2), (n - 3, n), (at - 2, at + 1)):
+            _settle(seq, pts, discs, ends, lo, hi)
+    return seq, pts
+
+
 def neighbours(discs: FloatArray, k: int = NEIGHBOURS) -> IntArray:
     """Each disc's ``k`` nearest discs by the gap between them (rims, not centres)."""
     n = len(discs)
