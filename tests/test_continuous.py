@@ -472,6 +472,44 @@ def test_searches_side_by_side_run_on_two_threads_and_keep_the_shortest(
     assert tour.length <= min(length for *_, length in spans) * (1 + 1e-9)
 
 
+def test_a_failing_search_thread_ends_the_others_after_their_current_search(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """When the search in one thread fails, the error reaches the caller and the other
+    thread starts no new search: of 30 s of searching, each search about 3 s, the other
+    thread finishes the one it is in (lane 0 first, so this is not the order the caller
+    waits in) and stops."""
+    import threading
+
+    from urpt_gcs.solvers import continuous
+
+    rng = np.random.default_rng(13)
+    n = 60
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 4.0, n)])
+    regions = RegionSet(discs=discs, depot_xy=(50.0, 50.0))
+    start = continuous._insertion_start(regions, np.random.default_rng(0))
+    real = continuous._search_discs
+    calls: list[str] = []
+    failed = threading.Event()
+
+    def spy(regions, seq, pts, seconds, seed):  # type: ignore[no-untyped-def]
+        name = threading.current_thread().name
+        calls.append(name)
+        if len(set(calls)) == 2 and name == calls[-1] and name != calls[0]:
+            failed.set()
+            raise RuntimeError("search failed")
+        return real(regions, seq, pts, seconds, seed)
+
+    monkeypatch.setattr(continuous, "_search_discs", spy)
+    with pytest.raises(RuntimeError, match="search failed"):
+        continuous._search_starts(regions, *start, 30.0, 0, threads=2)
+    assert failed.is_set()
+    first = calls[0]
+    # The first thread: the search it was in when the other failed, and at most one more
+    # (it may have begun one just before).
+    assert calls.count(first) <= 2
+
+
 def test_threads_below_one_are_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from urpt_gcs.errors import SettingsError
 
