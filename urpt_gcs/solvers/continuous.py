@@ -77,9 +77,11 @@ _DISCRETE_STARTS_UP_TO = _DRIFT_ABOVE
 _DISCRETE_START = 1.0 / 3.0
 # Up to _DISCRETE_STARTS_UP_TO discs around a depot, one ruin in _DEPOT_MOVE_EVERY (the
 # first of each thread's) moves the depot to another leg instead (:func:`disc_tour.depot_moved`;
-# the search's own moves do not, and its escape needs longer searches than these). On
-# bubbles4 (184 discs, a ring around the depot) four seeds ended 0.035-0.048 % above its
-# best known with depot moves among the ruins, 0.015-0.089 % without.
+# the search's own moves do not, and its escape needs longer searches than these). Its
+# gain is not established: on bubbles4 (184 discs, a ring around the depot) at 60 s with 1
+# thread, seeds 0-3 ended 0.000, 0.045, 0.028, 0.120 % above the best known with it,
+# 0.085, 0.015, 0.022, 0.074 % without, and 0.035-0.048 % with half the ruins, drawn at
+# random, depot moves.
 _DEPOT_MOVE_EVERY = 2
 # Extra candidates around each refined point: angles either side, in radians.
 _NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
