@@ -19,6 +19,8 @@ stops" need no special case.
   moves the depot to a far leg and searches from there a while (:func:`_escape`). The exact
   positions for the best tour.
 - :func:`insertion_tour`: a start for the search, the discs inserted in random order.
+- :func:`region_ruin`, :func:`depot_moved`: a whole tour perturbed (one area's discs put back
+  afresh; the depot joined to a far leg), for the search to start from again.
 """
 
 from __future__ import annotations
