@@ -355,7 +355,7 @@ def test_a_disc_tour_without_depot_touches_every_disc() -> None:
 @pytest.mark.parametrize(
     ("many", "depot"), [(True, (50.0, 50.0)), (True, None), (False, (50.0, 50.0))]
 )
-def test_discs_are_searched_from_insertion_starts_and_every_disc_is_entered(
+def test_discs_are_searched_from_many_starts_and_every_disc_is_entered(
     monkeypatch: pytest.MonkeyPatch, many: bool, depot: tuple[float, float] | None
 ) -> None:
     """The order search runs from the discrete tour, from other starts (above 200 discs

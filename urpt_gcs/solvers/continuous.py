@@ -40,7 +40,7 @@ _DISC_SAMPLE_BUDGET = 2400
 _MIN_DISC_SAMPLES = 4
 # Fraction of the time limit for the bound; the rest goes to solving and re-solving.
 _BOUND_SHARE = 0.3
-# Re-solves after the first solve (polygons).
+# Re-solves after the first solve, with the refined points among the candidates (polygons).
 _ROUNDS = 3
 # For discs: the share of the solve time for the one discrete solve; the continuous order
 # search (:mod:`urpt_gcs.solvers.disc_tour`) has the rest.
@@ -83,8 +83,6 @@ _DISCRETE_START = 1.0 / 3.0
 # 0.085, 0.015, 0.022, 0.074 % without, and 0.035-0.048 % with half the ruins, drawn at
 # random, depot moves.
 _DEPOT_MOVE_EVERY = 2
-# Extra candidates around each refined point: angles either side, in radians.
-_NEAR_ANGLES = (-0.2, -0.08, -0.03, 0.03, 0.08, 0.2)
 # Disc-segment pairs per block when a polyline's touches are found.
 _BLOCK_ELEMENTS = 1 << 18
 
@@ -142,21 +140,6 @@ def stops(points_xy: FloatArray) -> FloatArray:
     return pts[keep]
 
 
-def _near_samples(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
-    """Candidates on each disc's rim just either side of where the tour enters it."""
-    if regions.discs is None or len(seq) == 0:
-        return np.zeros((0, 2))
-    d = regions.discs[seq]
-    theta = np.arctan2(pts[:, 1] - d[:, 1], pts[:, 0] - d[:, 0])
-    out = []
-    r = d[:, 2] * (1.0 - 1e-9)
-    for da in _NEAR_ANGLES:
-        out.append(
-            np.column_stack([d[:, 0] + r * np.cos(theta + da), d[:, 1] + r * np.sin(theta + da)])
-        )
-    return np.vstack(out)
-
-
 def solve_regions(
     regions: RegionSet,
     settings: SolveSettings | None = None,
@@ -207,8 +190,7 @@ def solve_regions(
         left = discrete_budget - (time.perf_counter() - started)
         if left <= 0.05:
             break
-        extra = np.vstack([best_pts, _near_samples(regions, best_seq, best_pts)])
-        inst = regions.instance(np.vstack([base_xy, extra]))
+        inst = regions.instance(np.vstack([base_xy, best_pts]))
         rounds_left = rounds - round_
         tour = solve(inst, solver, _share(settings, left / rounds_left, seed_offset=round_ + 1))
         seq, pts = touches(inst, tour)
