@@ -25,8 +25,8 @@ sys.path.insert(0, str(REPO / "tests"))
 from independent import leg_clearances, load_raster, read_waypoints_file  # noqa: E402
 from test_plan import REAL_CASES, _valid_targets  # noqa: E402
 
-from urpt_gcs.outputs.products import write_products  # noqa: E402
-from urpt_gcs.planner import Plan, PlanSettings, plan  # noqa: E402
+from urpt_gcs.files.products import write_products  # noqa: E402
+from urpt_gcs.pipeline.planner import Plan, PlanSettings, plan  # noqa: E402
 from urpt_gcs.solvers import SolveSettings  # noqa: E402
 
 

@@ -8,7 +8,7 @@ Per instance: the best known cost, GLNS's published mean cost, gap and time (def
 ``HeuristicSolver.solve``), and OR-Tools routing given the same time limit. The time limit of
 both is ``--time-factor`` times GLNS's mean time; the heuristic usually stops earlier by its
 own rule. Compilation of the heuristic's kernels happens once, before any clock starts.
-Instances are read with :func:`urpt_gcs.outputs.formats.gtsplib.read_gtsplib`; run single-threaded.
+Instances are read with :func:`urpt_gcs.files.formats.gtsplib.read_gtsplib`; run single-threaded.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import statistics
 import time
 from pathlib import Path
 
-from urpt_gcs.outputs.formats.gtsplib import read_gtsplib
+from urpt_gcs.files.formats.gtsplib import read_gtsplib
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.clustered import cluster_instance
 from urpt_gcs.solvers.heuristic import HeuristicSolver, warm_up

@@ -7,7 +7,7 @@ Each case runs ``urpt-gcs`` on the demo site in a child process (limited to 8 Gi
 space and 300 s, so a regression cannot take the machine down) and reports its exit status,
 wall time, peak resident memory (``ru_maxrss`` of that child, from ``os.wait4``) and the first
 line of its stderr. FIFOs, links to devices and the oversized file are made in a temporary
-folder. The parse figure is :func:`urpt_gcs.targets.read_targets` on a generated KML of
+folder. The parse figure is :func:`urpt_gcs.site.targets.read_targets` on a generated KML of
 ``--placemarks`` points, in this process.
 """
 
@@ -24,8 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from urpt_gcs.inputs import TARGETS_MAX_BYTES
-from urpt_gcs.targets import read_targets
+from urpt_gcs.site.inputs import TARGETS_MAX_BYTES
+from urpt_gcs.site.targets import read_targets
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "missions" / "demo"

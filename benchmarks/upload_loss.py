@@ -3,9 +3,9 @@
     .venv/bin/python benchmarks/upload_loss.py [--runs N] [--loss 0 0.1 0.2] [--retries R]
         [--seed S [--same-seed]] [--items K] [--upload-timeout S] [--verbose]
 
-Each run starts the in-process simulator (``urpt_gcs.sitl``) on a free loopback UDP port with
+Each run starts the in-process simulator (``urpt_gcs.sim``) on a free loopback UDP port with
 ``--loss P`` each way and seed = run number, uploads the demo mission (28 items) through
-:func:`urpt_gcs.drone.link.upload` with the default settings, and checks what the simulator then
+:func:`urpt_gcs.vehicle.link.upload` with the default settings, and checks what the simulator then
 holds. Prints, per loss rate, the share of runs verified, the attempts used, the median and
 maximum wall time of the upload call (connecting included) and of the upload and read-back
 alone (verified runs, from the report), and any run that reported success
@@ -24,14 +24,14 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from urpt_gcs.drone import mavsdk_link
-from urpt_gcs.drone.link import UploadSettings, upload
-from urpt_gcs.drone.readback import WireItem, compare, wire_items
 from urpt_gcs.errors import LinkError
-from urpt_gcs.mission import Mission
-from urpt_gcs.outputs.formats import read_plan
-from urpt_gcs.sitl import SitlServer, VehicleSettings
-from urpt_gcs.sitl.replay import free_udp_port
+from urpt_gcs.files.formats import read_plan
+from urpt_gcs.flight.mission import Mission
+from urpt_gcs.replay.fly import free_udp_port
+from urpt_gcs.sim import SitlServer, VehicleSettings
+from urpt_gcs.vehicle import mavsdk_link
+from urpt_gcs.vehicle.link import UploadSettings, upload
+from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO_PLAN = REPO / "missions" / "demo" / "out" / "mission.plan"

@@ -17,7 +17,7 @@ from click.testing import CliRunner
 from conftest import DEMO
 
 from urpt_gcs.cli import main
-from urpt_gcs.targets import Target, read_targets
+from urpt_gcs.site.targets import Target, read_targets
 
 SITE, TARGETS = DEMO / "site.tif", DEMO / "targets.kml"
 HOME = (47.688761595, 9.423090709)

@@ -10,10 +10,10 @@ from typing import Any
 
 from conftest import DEMO
 
-from urpt_gcs.mission import Mission
-from urpt_gcs.outputs.formats import read_plan
-from urpt_gcs.sitl import SitlServer, VehicleSettings
-from urpt_gcs.sitl.replay import free_udp_port
+from urpt_gcs.files.formats import read_plan
+from urpt_gcs.flight.mission import Mission
+from urpt_gcs.replay.fly import free_udp_port
+from urpt_gcs.sim import SitlServer, VehicleSettings
 
 DEMO_PLAN = DEMO / "out" / "mission.plan"
 

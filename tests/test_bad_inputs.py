@@ -28,7 +28,7 @@ from click.testing import CliRunner
 from conftest import DEMO
 
 from urpt_gcs.cli import main
-from urpt_gcs.inputs import TARGETS_MAX_BYTES
+from urpt_gcs.site.inputs import TARGETS_MAX_BYTES
 
 BAD = Path(__file__).resolve().parent / "data" / "bad"
 SITE = str(DEMO / "site.tif")
@@ -544,7 +544,7 @@ NOBODY = "udpin://127.0.0.1:14999"  # nothing listens: a connection attempt woul
 
 def run_upload(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, float]:
     """`urpt-gcs upload PATH` with a connection that must not be tried."""
-    from urpt_gcs.drone import mavsdk_link
+    from urpt_gcs.vehicle import mavsdk_link
 
     def no_connection(*_args: object, **_kwargs: object) -> None:
         raise AssertionError("a connection was attempted")

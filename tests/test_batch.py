@@ -18,11 +18,11 @@ from distributed import Client
 from independent import check_mission
 from test_plan import _kml_targets, _valid_targets
 
-from urpt_gcs.batch import PLAN_DEFAULTS, check_inputs, read_jobs, run_batch
+from urpt_gcs.batch.cluster import map_jobs, open_client
+from urpt_gcs.batch.jobs import PLAN_DEFAULTS, check_inputs, read_jobs, run_batch
 from urpt_gcs.bench.paper import Row, run_paper
 from urpt_gcs.cli import main
 from urpt_gcs.cli.plan import plan_command
-from urpt_gcs.cluster import map_jobs, open_client
 from urpt_gcs.errors import ClusterError, JobsFileError, SettingsError
 
 # What differs between two runs of the same plan: times, and where the files were written.
@@ -113,7 +113,7 @@ camera = ["wide", "p4", "own"]
     wide, p4, own = read_jobs(jobs_file, tmp_path / "out")
     assert (wide.settings.frame, wide.settings.fov_deg) == (None, 40.0)
 
-    from urpt_gcs.camera import frame_from_flags
+    from urpt_gcs.site.camera import frame_from_flags
 
     assert p4.settings.frame == frame_from_flags("phantom4rtk", None, None, None)
     assert (p4.settings.gsd_cm, p4.settings.headings) == (2.5, 2)

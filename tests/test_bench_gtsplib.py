@@ -14,7 +14,7 @@ import urpt_gcs.bench.gtsplib as bench
 from urpt_gcs.bench.gtsplib import Row, bench_solvers, format_table, run_gtsplib, tour_cost
 from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.outputs.formats.gtsplib import read_gtsplib
+from urpt_gcs.files.formats.gtsplib import read_gtsplib
 from urpt_gcs.solvers import SOLVERS
 from urpt_gcs.solvers.routing import RoutingSolver
 

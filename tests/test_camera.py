@@ -17,22 +17,22 @@ from independent import FrameCamera, check_mission, load_raster, read_waypoints_
 from pymavlink import mavutil
 from test_plan import _kml_targets, _valid_targets
 
-from urpt_gcs.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.cli import main
-from urpt_gcs.drone.readback import WireItem, compare, wire_items
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.mission import (
+from urpt_gcs.files.products import write_products
+from urpt_gcs.flight.mission import (
     GeoPoint,
     MissionSettings,
     build_mission,
     photo_headings,
     upload_problem,
 )
-from urpt_gcs.outputs.products import write_products
-from urpt_gcs.planner import PlanSettings, plan
-from urpt_gcs.sitl.store import Item, ardupilot_stored
+from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.sim.store import Item, ardupilot_stored
+from urpt_gcs.site.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.visibility import Camera
+from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.visibility.regions import Camera
 
 MAV = mavutil.mavlink
 FAST = SolveSettings(time_limit_s=1.0)
@@ -293,8 +293,8 @@ def test_a_photo_off_its_heading_is_a_problem() -> None:
     """A CAMERA_FEEDBACK heading more than 5 degrees off its waypoint's is reported."""
     import pyproj as _pyproj
 
-    from urpt_gcs.sitl.judge import _photo_headings
-    from urpt_gcs.sitl.replay import PhotoFix
+    from urpt_gcs.replay.fly import PhotoFix
+    from urpt_gcs.replay.judge import _photo_headings
 
     mission = _mission("ardupilot", [10.0, 100.0, 200.0])
     photos = [PhotoFix(k + 1, 47.0, 9.0, 50.0, k, h) for k, h in enumerate([12.0, 94.0, 200.0])]

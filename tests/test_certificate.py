@@ -22,12 +22,12 @@ from conftest import WriteDem
 from independent import check_mission
 from scipy.ndimage import map_coordinates
 
-from urpt_gcs.certificate import outer_regions
-from urpt_gcs.outputs.products import write_products
-from urpt_gcs.outputs.report import flight_quality, summary_text
-from urpt_gcs.planner import PlanSettings, plan
+from urpt_gcs.bound.certificate import outer_regions
+from urpt_gcs.bound.lower_bound import lower_bound
+from urpt_gcs.files.products import write_products
+from urpt_gcs.files.report import flight_quality, summary_text
+from urpt_gcs.pipeline.planner import PlanSettings, plan
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.solvers.bound import lower_bound
 
 ORIGIN = (500_000.0, 5_200_000.0)
 RES = 0.5
@@ -224,9 +224,9 @@ def test_refined_stops_see_their_targets_on_paper_terrains(
     refined stop sees the targets it is counted for by a brute-force line of sight on the
     raw raster (dense samples, scipy's interpolation)."""
     from urpt_gcs.bench.paper import ALTITUDE, paper_instance, random_targets, tin_terrain
-    from urpt_gcs.refinement import Site, refine_tour
+    from urpt_gcs.flight.refinement import Site, refine_tour
     from urpt_gcs.solvers import solve
-    from urpt_gcs.visibility import Camera
+    from urpt_gcs.visibility.regions import Camera
 
     terrain = tin_terrain(terrain_seed)
     targets = random_targets(terrain_seed, m)
@@ -278,10 +278,10 @@ def test_a_tour_read_off_the_bounds_relaxed_tour(terrain_seed: int, m: int, fov:
     its targets by brute force, the tour is not much longer than the polyline (it leaves it
     only where the polyline grazes an outer star), and never shorter than the bound."""
     from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
-    from urpt_gcs.certificate import certify
-    from urpt_gcs.refinement import Site, refine_tour, tour_along
+    from urpt_gcs.bound.certificate import certify
+    from urpt_gcs.flight.refinement import Site, refine_tour, tour_along
     from urpt_gcs.solvers import Tour
-    from urpt_gcs.visibility import Camera
+    from urpt_gcs.visibility.regions import Camera
 
     terrain = tin_terrain(terrain_seed)
     targets = random_targets(terrain_seed, m)
@@ -311,9 +311,9 @@ def _paper_stars(seed: int, m: int):  # type: ignore[no-untyped-def]
     """Paper terrain ``seed``, its ``m`` targets at 40 deg: the terrain, targets, their
     ground, camera, outer stars with their area ratio, the site and an empty tour."""
     from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
-    from urpt_gcs.refinement import Site
+    from urpt_gcs.flight.refinement import Site
     from urpt_gcs.solvers import Tour
-    from urpt_gcs.visibility import Camera
+    from urpt_gcs.visibility.regions import Camera
 
     terrain = tin_terrain(seed)
     targets = random_targets(seed, m)
@@ -331,8 +331,8 @@ def test_whole_stars_walked_finer_bring_the_bound_within_half_a_percent() -> Non
     force). Walking the stars the relaxed tour meets again whole, sectors split in two a
     round, brings it within 0.5 % (walking only the sectors met, it stayed above 1 % after
     30 s), and never above the tour."""
-    from urpt_gcs.certificate import certify, finer_stars
-    from urpt_gcs.refinement import refine_along
+    from urpt_gcs.bound.certificate import certify, finer_stars
+    from urpt_gcs.flight.refinement import refine_along
 
     terrain, targets, ground, camera, regions, ratio, site, like = _paper_stars(8, 8)
     plain = certify(regions, 1e9, 5.0)
@@ -357,8 +357,8 @@ def test_stars_tightened_where_the_relaxed_tour_meets_them() -> None:
     reaches the cone's edge where nothing is seen. Walking the stars it meets again, finer,
     raises the bound, which stays below a real tour (read off the polyline, every stop seen
     by brute force)."""
-    from urpt_gcs.certificate import certify, finer_stars
-    from urpt_gcs.refinement import refine_along
+    from urpt_gcs.bound.certificate import certify, finer_stars
+    from urpt_gcs.flight.refinement import refine_along
 
     terrain, targets, ground, camera, regions, ratio, site, like = _paper_stars(2, 6)
     # A real tour's length lets the search finish; the stars are tightened in the time left.

@@ -13,7 +13,7 @@ import rasterio
 from numpy.typing import NDArray
 from pyproj import Transformer
 
-from urpt_gcs.demo import DemoSite, make_demo_site
+from urpt_gcs.site.demo import DemoSite, make_demo_site
 
 KML = "{http://www.opengis.net/kml/2.2}"
 CLEARANCE_M = 30.0  # flight plane above the highest valid cell

@@ -26,13 +26,13 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from scipy.ndimage import minimum_filter1d
 
 from urpt_gcs.cli import main
-from urpt_gcs.drone.fleet_upload import upload_fleet
-from urpt_gcs.drone.link import UploadSettings
-from urpt_gcs.outputs.fleet_folder import read_fleet
-from urpt_gcs.sitl import SitlServer, VehicleSettings
-from urpt_gcs.sitl.fleet import FleetReport, replay_fleet
-from urpt_gcs.sitl.replay import Flight, ReplaySettings, free_udp_port, read_mission
-from urpt_gcs.targets import read_targets
+from urpt_gcs.files.fleet_folder import read_fleet
+from urpt_gcs.replay.fleet import FleetReport, replay_fleet
+from urpt_gcs.replay.fly import Flight, ReplaySettings, free_udp_port, read_mission
+from urpt_gcs.sim import SitlServer, VehicleSettings
+from urpt_gcs.site.targets import read_targets
+from urpt_gcs.vehicle.fleet_upload import upload_fleet
+from urpt_gcs.vehicle.link import UploadSettings
 
 BINARY = SHARED / "ardupilot" / "arducopter"
 FIRST = ("T01", "T02", "T03", "T04", "T05", "T06", "T07", "T08")
@@ -352,7 +352,7 @@ def planned2(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _replay_planned(fleet: Path, settings: ReplaySettings, within_m: float = 1.5) -> list[Flight]:
     report = replay_fleet(SITE, TARGETS, read_fleet(fleet), settings)
-    from urpt_gcs.sitl.fleet import fleet_report_text
+    from urpt_gcs.replay.fleet import fleet_report_text
 
     print(fleet_report_text(report).split("\n\nfleet: ")[-1])
     assert report.ok, (report.problems, report.together.problems)
@@ -381,7 +381,7 @@ def test_a_vehicle_slow_to_arm_keeps_the_planned_stagger(planned2: Path) -> None
     after it, by the planned delay, rather than into the gap the plan left."""
     import asyncio
 
-    from urpt_gcs.sitl.fleet import _fly_all
+    from urpt_gcs.replay.fleet import _fly_all
 
     fleet = read_fleet(planned2)
     missions = [read_mission(v.missions[0]) for v in fleet.vehicles]
@@ -449,7 +449,7 @@ def test_ctrl_c_during_a_fleet_replay_stops_every_sitl(
     fleet2: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Both SITLs are up when Ctrl-C comes; both processes are gone after it."""
-    import urpt_gcs.sitl.fleet as fleet_module
+    import urpt_gcs.replay.fleet as fleet_module
 
     def interrupted(*_args: Any) -> Any:
         raise KeyboardInterrupt
@@ -471,8 +471,8 @@ def _synthetic_flight(
     """A vehicle crossing the origin's meridian at 100 m, 5 m/s east or west, its clock
     ``boot_s`` ahead, running ``rate`` simulated seconds per wall second; each position
     arrives 0-20 ms late."""
-    from urpt_gcs.drone.link import UploadReport
-    from urpt_gcs.sitl.replay import TrackPoint, VehicleIdentity
+    from urpt_gcs.replay.fly import TrackPoint, VehicleIdentity
+    from urpt_gcs.vehicle.link import UploadReport
 
     rng = np.random.default_rng(seed)
     lat0, lon0 = 47.0, 9.0
@@ -501,7 +501,7 @@ def test_the_closest_approach_is_measured_at_equal_instants() -> None:
     """Two vehicles pass 3 m apart at t = 50 s; their clocks differ by 123 s and one runs at
     8x; arrival jitter of up to 20 ms (0.16 s simulated, 1.6 m at their closing speed) is
     taken off."""
-    from urpt_gcs.sitl.fleet import _send_times, closest_approach
+    from urpt_gcs.replay.fleet import _send_times, closest_approach
 
     east = _synthetic_flight(5.0, 0.0, 0.0, 8.0, seed=1)
     west = _synthetic_flight(-5.0, 3.0, 123.0, 8.0, seed=2)

@@ -18,13 +18,13 @@ from independent import check_mission, load_raster, read_waypoints_file
 from test_plan import _valid_targets
 
 from urpt_gcs.cli import main
-from urpt_gcs.fleet import Track, _pair_closest, closest, timing_slack_s
-from urpt_gcs.gtsp import Geometry, Instance
-from urpt_gcs.safety import FlightModel
+from urpt_gcs.flight.safety import FlightModel
+from urpt_gcs.pipeline.fleet import Track, _pair_closest, closest, timing_slack_s
+from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import solve
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.fleet import Vehicle, makespan_bound, plan_fleet, restrict
-from urpt_gcs.targets import read_targets
+from urpt_gcs.visibility.cover import Geometry, Instance
 
 ALTITUDE_M = 40.0
 FOV_DEG = 30.0
@@ -327,8 +327,8 @@ def test_time_separation_from_homes_of_their_own(tmp_path: Path) -> None:
 
 def test_one_vehicle_is_the_plain_plan(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """--vehicles 1 runs exactly the single-vehicle plan, with the same settings."""
-    import urpt_gcs.fleet
-    import urpt_gcs.planner
+    import urpt_gcs.pipeline.fleet
+    import urpt_gcs.pipeline.planner
 
     calls = []
 
@@ -339,8 +339,8 @@ def test_one_vehicle_is_the_plain_plan(monkeypatch: pytest.MonkeyPatch, tmp_path
     def no_fleet(*args: object, **kwargs: object) -> None:
         raise AssertionError("the fleet planner ran for one vehicle")
 
-    monkeypatch.setattr(urpt_gcs.planner, "plan", record)
-    monkeypatch.setattr(urpt_gcs.fleet, "plan_fleet_mission", no_fleet)
+    monkeypatch.setattr(urpt_gcs.pipeline.planner, "plan", record)
+    monkeypatch.setattr(urpt_gcs.pipeline.fleet, "plan_fleet_mission", no_fleet)
     base = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
     for extra in ([], ["--vehicles", "1"]):
         CliRunner().invoke(main, [*base, "--out", str(tmp_path / "o"), *extra])
@@ -364,8 +364,8 @@ def test_track_follows_the_plan_through_every_stop_in_the_planned_time() -> None
     """Sorties back to back: the track's length in time is the plan's flight time (summed by
     the sortie splitter), it passes over every stop at the plane and starts and ends on the
     ground at home."""
-    from urpt_gcs.fleet import track
-    from urpt_gcs.planner import PlanSettings, plan
+    from urpt_gcs.pipeline.fleet import track
+    from urpt_gcs.pipeline.planner import PlanSettings, plan
 
     settings = PlanSettings(solve=SolveSettings(time_limit_s=0.5), endurance_min=4.0)
     result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)

@@ -33,9 +33,11 @@ from mavsdk.autopilot import Autopilot
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-import urpt_gcs.outputs.formats as formats
+import urpt_gcs.files.formats as formats
 from urpt_gcs.errors import MissionFileError
-from urpt_gcs.mission import (
+from urpt_gcs.files.formats import plan_json, read_plan, read_waypoints, waypoints_text
+from urpt_gcs.files.formats.qgc_plan import ReplayCheck, read_replay_check
+from urpt_gcs.flight.mission import (
     AUTOPILOT_OF,
     DEFAULT_SPEED_M_S,
     FIRMWARES,
@@ -46,9 +48,7 @@ from urpt_gcs.mission import (
     MissionSettings,
     build_mission,
 )
-from urpt_gcs.outputs.formats import plan_json, read_plan, read_waypoints, waypoints_text
-from urpt_gcs.outputs.formats.qgc_plan import ReplayCheck, read_replay_check
-from urpt_gcs.targets import Target
+from urpt_gcs.site.targets import Target
 
 HOME = GeoPoint(47.397742, 8.545594, 488.5)
 # Seven decimals, so a lost digit shows.

@@ -11,10 +11,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from simulated import DEMO_PLAN
 
-from urpt_gcs.drone.link import FenceRefused, upload_fence_verified
-from urpt_gcs.drone.readback import WireItem
 from urpt_gcs.errors import LinkError, MissionFileError
-from urpt_gcs.geofence import (
+from urpt_gcs.flight.geofence import (
     FENCE_TYPE,
     FenceCircle,
     Geofence,
@@ -22,6 +20,8 @@ from urpt_gcs.geofence import (
     fence_items,
     read_plan_geofence,
 )
+from urpt_gcs.vehicle.link import FenceRefused, upload_fence_verified
+from urpt_gcs.vehicle.readback import WireItem
 
 SQUARE = ((47.688, 9.422), (47.688, 9.4245), (47.6895, 9.4245), (47.6895, 9.422))
 

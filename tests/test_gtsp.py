@@ -1,4 +1,5 @@
-"""Tests for urpt_gcs.gtsp: sparse cover sets, the two distance forms, the memory estimate."""
+"""Tests for urpt_gcs.visibility.cover: sparse cover sets, the two distance forms, the memory
+estimate."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import pyproj
 import pytest
 from affine import Affine
 
-from urpt_gcs.gtsp import (
+from urpt_gcs.site.inputs import MEMORY_BUDGET_ENV, MemoryBudgetError
+from urpt_gcs.site.terrain import Terrain
+from urpt_gcs.visibility.cover import (
     Covers,
     Instance,
     cover_pairs,
@@ -15,9 +18,7 @@ from urpt_gcs.gtsp import (
     euclidean_matrix,
     require_instance_memory,
 )
-from urpt_gcs.inputs import MEMORY_BUDGET_ENV, MemoryBudgetError
-from urpt_gcs.terrain import Terrain
-from urpt_gcs.visibility import Camera
+from urpt_gcs.visibility.regions import Camera
 
 
 def _half_metre_grid(z: np.ndarray) -> Terrain:
@@ -147,8 +148,8 @@ def test_cover_pairs_in_chunks_are_every_pair_in_sight_and_refuse_over_budget(
     """Gathered a chunk of viewpoints at a time, the pairs are exactly those within the cone
     whose line of sight clears (tested pair by pair here); a budget too small for them is
     refused with the figure before the chunk that would pass it is kept."""
-    import urpt_gcs.gtsp as gtsp
-    from urpt_gcs.visibility import line_of_sight
+    import urpt_gcs.visibility.cover as gtsp
+    from urpt_gcs.visibility.regions import line_of_sight
 
     rng = np.random.default_rng(8)
     z = 100.0 + 6.0 * rng.random((200, 200))

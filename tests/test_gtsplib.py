@@ -20,8 +20,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from urpt_gcs.errors import OutputError, SettingsError
-from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
-from urpt_gcs.outputs.formats.gtsplib import export_gtsplib, read_gtsplib, read_tour, write_gtsplib
+from urpt_gcs.files.formats.gtsplib import export_gtsplib, read_gtsplib, read_tour, write_gtsplib
+from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
 
 TOURS = sorted((GTSPLIB / "tours").glob("*.tour"))
 needs_gtsplib = needs_shared(GTSPLIB)

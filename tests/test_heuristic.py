@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from conftest import GTSPLIB, needs_shared
 
-from urpt_gcs.gtsp import Covers, Instance, euclidean_matrix
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.clustered import cluster_instance
 from urpt_gcs.solvers.heuristic import HeuristicSolver, SearchSettings, solve_clustered, warm_up
+from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
 
 SETTINGS = SolveSettings(time_limit_s=10.0, seed=0)
 
@@ -197,7 +197,7 @@ def test_search_settings_are_validated(field: str, value: object) -> None:
 )
 @needs_shared(GTSPLIB)
 def test_reaches_best_known_on_gtsplib(name: str, best_known: int) -> None:
-    gtsplib = pytest.importorskip("urpt_gcs.outputs.formats.gtsplib")
+    gtsplib = pytest.importorskip("urpt_gcs.files.formats.gtsplib")
     instance = gtsplib.read_gtsplib(GTSPLIB / f"{name}.gtsp")
     tour = HeuristicSolver().solve(instance, SETTINGS)
     assert tour.length == best_known

@@ -12,7 +12,7 @@ import rasterio
 from rasterio.transform import from_origin
 
 from urpt_gcs.errors import TargetsError
-from urpt_gcs.inputs import (
+from urpt_gcs.site.inputs import (
     MEMORY_BUDGET_ENV,
     MemoryBudgetError,
     memory_budget_bytes,
@@ -20,7 +20,7 @@ from urpt_gcs.inputs import (
     require_memory,
     require_regular_file,
 )
-from urpt_gcs.terrain import open_dem, read_terrain
+from urpt_gcs.site.terrain import open_dem, read_terrain
 
 
 def _read(path: Path, cap: int = 1024) -> bytes:

@@ -1,7 +1,7 @@
 """Upload with read-back: the real MAVSDK on one side, the simulated vehicle on the other.
 
 Every test here goes over loopback UDP through MAVSDK 4.x's ``mission_raw`` to a
-:class:`~urpt_gcs.sitl.SitlServer`; what the vehicle then holds is read from the simulator
+:class:`~urpt_gcs.sim.SitlServer`; what the vehicle then holds is read from the simulator
 itself, so a success reported by the uploader is checked against the vehicle's real state.
 """
 
@@ -24,8 +24,19 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
-from urpt_gcs.drone import mavsdk_link
-from urpt_gcs.drone.link import (
+from urpt_gcs.errors import LinkError, SettingsError
+from urpt_gcs.flight.mission import (
+    GeoPoint,
+    Mission,
+    MissionItem,
+    MissionSettings,
+    build_mission,
+    upload_problem,
+)
+from urpt_gcs.sim.server import SitlServer
+from urpt_gcs.sim.store import Item, ardupilot_stored, px4_stored
+from urpt_gcs.vehicle import mavsdk_link
+from urpt_gcs.vehicle.link import (
     AutopilotKind,
     LinkTimeout,
     MissionRejected,
@@ -35,18 +46,7 @@ from urpt_gcs.drone.link import (
     upload,
     upload_verified,
 )
-from urpt_gcs.drone.readback import WireItem, compare, wire_items
-from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.mission import (
-    GeoPoint,
-    Mission,
-    MissionItem,
-    MissionSettings,
-    build_mission,
-    upload_problem,
-)
-from urpt_gcs.sitl.server import SitlServer
-from urpt_gcs.sitl.store import Item, ardupilot_stored, px4_stored
+from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
 
 WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
@@ -100,7 +100,7 @@ def test_plan_then_upload_from_the_command_line(tmp_path) -> None:
         assert result.exit_code == 0, result.output + result.stderr
         assert "read back identical" not in result.output  # --quiet
         planned = (tmp_path / "out" / "mission.plan").read_text()
-        from urpt_gcs.outputs.formats import read_plan
+        from urpt_gcs.files.formats import read_plan
 
         assert_holds(server, read_plan(planned, "mission.plan"))
 
@@ -135,7 +135,7 @@ def test_what_the_planner_writes_passes_the_checks_and_reads_back(
     firmware: str, suffix: str, tmp_path
 ) -> None:
     """The checks before upload refuse nothing the planner writes, for either firmware."""
-    from urpt_gcs.outputs.formats import plan_json, waypoints_text
+    from urpt_gcs.files.formats import plan_json, waypoints_text
 
     demo = demo_mission()
     waypoints = [(i.params[4], i.params[5]) for i in demo.items if i.command == WAYPOINT]
@@ -429,7 +429,7 @@ def test_refusal_after_boot_is_waited_out() -> None:
 
 
 def test_a_vehicle_that_keeps_starting_is_named_so(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("urpt_gcs.drone.link.STARTING_WAIT_S", 1.0)
+    monkeypatch.setattr("urpt_gcs.vehicle.link.STARTING_WAIT_S", 1.0)
     mission = demo_mission()
     with simulated(mission, boot_s=30.0) as (_server, url), pytest.raises(LinkError) as raised:
         upload(mission, url)
@@ -591,7 +591,7 @@ def test_simulator_storage_passes_and_any_nudge_fails(
     assert check.equal == (nudge is None)
 
 
-# --- PX4's read-back (as PX4 v1.16 SITL returned the demo, see urpt_gcs/drone/readback.py) ---
+# --- PX4's read-back (as PX4 v1.16 SITL returned the demo, see urpt_gcs/vehicle/readback.py) ---
 
 RELATIVE_INT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF

@@ -16,8 +16,8 @@ import pytest
 from rasterio.transform import Affine
 from scipy.ndimage import map_coordinates
 
-from urpt_gcs.terrain import Terrain
-from urpt_gcs.visibility import (
+from urpt_gcs.site.terrain import Terrain
+from urpt_gcs.visibility.regions import (
     Camera,
     azimuths,
     finer_reach,

@@ -19,10 +19,10 @@ from independent import (
 )
 from pymavlink import mavutil
 
-from urpt_gcs.outputs.products import write_products
-from urpt_gcs.planner import PlanSettings, plan
+from urpt_gcs.files.products import write_products
+from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.targets import read_targets
 
 FAST = SolveSettings(time_limit_s=1.0)
 

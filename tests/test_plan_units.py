@@ -22,11 +22,11 @@ from conftest import DEMO, WriteDem
 from independent import check_mission, load_raster, read_waypoints_file, sees
 
 from urpt_gcs.cli import main
-from urpt_gcs.outputs.products import write_products
-from urpt_gcs.outputs.report import summary_text
-from urpt_gcs.planner import PlanSettings, plan
+from urpt_gcs.files.products import write_products
+from urpt_gcs.files.report import summary_text
+from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.targets import read_targets
 
 SITE = DEMO / "site.tif"
 TARGETS = DEMO / "targets.kml"

@@ -16,7 +16,7 @@ from simulated import DEMO_PLAN, demo_mission
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.sitl import px4_sitl
+from urpt_gcs.replay import px4 as px4_sitl
 
 
 def _build(folder: Path, script: str) -> Path:

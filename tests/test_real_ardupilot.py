@@ -27,14 +27,14 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
-from urpt_gcs.drone.link import upload
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.geofence import read_plan_geofence
-from urpt_gcs.mission import Mission, photo_headings
-from urpt_gcs.outputs.formats import read_plan
-from urpt_gcs.sitl.ardupilot_sitl import RunningSitl, launch, resolve_binary
-from urpt_gcs.sitl.replay import Flight, ReplaySettings, replay
-from urpt_gcs.targets import read_targets
+from urpt_gcs.files.formats import read_plan
+from urpt_gcs.flight.geofence import read_plan_geofence
+from urpt_gcs.flight.mission import Mission, photo_headings
+from urpt_gcs.replay.ardupilot import RunningSitl, launch, resolve_binary
+from urpt_gcs.replay.fly import Flight, ReplaySettings, replay
+from urpt_gcs.site.targets import read_targets
+from urpt_gcs.vehicle.link import upload
 
 ARDUPILOT = SHARED / "ardupilot"
 BINARY = ARDUPILOT / "arducopter"

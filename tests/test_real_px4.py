@@ -1,6 +1,6 @@
 """Flights on PX4's own SITL (the SIH quadrotor in ``../shared/px4``), started by the tool.
 
-Each flight boots a fresh PX4 in a scratch folder (:mod:`urpt_gcs.sitl.px4_sitl`), uploads
+Each flight boots a fresh PX4 in a scratch folder (:mod:`urpt_gcs.replay.px4`), uploads
 through the verified upload, flies in AUTO and is judged on the demo DEM. At 20x SIH keeps
 time but CAMERA_IMAGE_CAPTURED messages were lost on the way on 2 cores; 10x lost none.
 """
@@ -27,13 +27,9 @@ from mavsdk.plugins.mission_raw import MissionItem as MavsdkItem
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
-from urpt_gcs.drone.link import upload, upload_verified
-from urpt_gcs.drone.mavsdk_link import connect
-from urpt_gcs.drone.readback import compare, wire_items
-from urpt_gcs.mission import Mission, waypoint_positions
-from urpt_gcs.sitl import px4_sitl
-from urpt_gcs.sitl.judge import Expected, ReplayReport, TargetSeen, judge
-from urpt_gcs.sitl.replay import (
+from urpt_gcs.flight.mission import Mission, waypoint_positions
+from urpt_gcs.replay import px4 as px4_sitl
+from urpt_gcs.replay.fly import (
     Flight,
     PhotoFix,
     ReplaySettings,
@@ -42,6 +38,10 @@ from urpt_gcs.sitl.replay import (
     free_udp_port,
     read_mission,
 )
+from urpt_gcs.replay.judge import Expected, ReplayReport, TargetSeen, judge
+from urpt_gcs.vehicle.link import upload, upload_verified
+from urpt_gcs.vehicle.mavsdk_link import connect
+from urpt_gcs.vehicle.readback import compare, wire_items
 
 PX4 = SHARED / "px4"
 pytestmark = [

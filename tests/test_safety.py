@@ -19,12 +19,12 @@ from shapely.geometry import Point, shape
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError
-from urpt_gcs.outputs.products import write_products
-from urpt_gcs.planner import Plan, PlanSettings, plan
-from urpt_gcs.safety import FlightModel, split_sorties
+from urpt_gcs.files.products import write_products
+from urpt_gcs.flight.safety import FlightModel, split_sorties
+from urpt_gcs.flight.sorties import order_sorties
+from urpt_gcs.pipeline.planner import Plan, PlanSettings, plan
+from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import SolveSettings, Tour
-from urpt_gcs.sorties import order_sorties
-from urpt_gcs.targets import read_targets
 
 ORIGIN = (500_000.0, 5_200_000.0)
 TO_GEO = pyproj.Transformer.from_crs("EPSG:32632", "EPSG:4326", always_xy=True)
@@ -323,7 +323,7 @@ def test_geojson_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, 
 
 
 def test_map_draws_exactly_the_flown_sorties(sortie_plan: tuple[Plan, Path, dict]) -> None:
-    from urpt_gcs.outputs.mapview import map_figure
+    from urpt_gcs.files.mapview import map_figure
 
     result, out, data = sortie_plan
     assert (out / "map.png").read_bytes().startswith(b"\x89PNG")

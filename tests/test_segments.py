@@ -10,8 +10,8 @@ from affine import Affine
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from urpt_gcs.segments import clear_of_terrain, segment_profile
-from urpt_gcs.terrain import Terrain
+from urpt_gcs.site.terrain import Terrain
+from urpt_gcs.visibility.segments import clear_of_terrain, segment_profile
 
 CRS = pyproj.CRS.from_epsg(32632)
 DENSE = 40_001

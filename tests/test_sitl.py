@@ -19,16 +19,16 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
-from urpt_gcs.drone.link import upload
-from urpt_gcs.drone.readback import WireItem, compare, wire_items
-from urpt_gcs.mission import Mission
-from urpt_gcs.outputs.formats import waypoints_text
-from urpt_gcs.sitl import VehicleSettings
-from urpt_gcs.sitl.events import Reached, Text
-from urpt_gcs.sitl.model import Vehicle
-from urpt_gcs.sitl.replay import ReplaySettings, fly, read_mission, replay
-from urpt_gcs.sitl.store import Home, Item, MissionStore
-from urpt_gcs.sitl.transfer import REREQUEST_S, UPLOAD_TIMEOUT_S, MissionTransfer
+from urpt_gcs.files.formats import waypoints_text
+from urpt_gcs.flight.mission import Mission
+from urpt_gcs.replay.fly import ReplaySettings, fly, read_mission, replay
+from urpt_gcs.sim import VehicleSettings
+from urpt_gcs.sim.events import Reached, Text
+from urpt_gcs.sim.model import Vehicle
+from urpt_gcs.sim.store import Home, Item, MissionStore
+from urpt_gcs.sim.transfer import REREQUEST_S, UPLOAD_TIMEOUT_S, MissionTransfer
+from urpt_gcs.vehicle.link import upload
+from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
 
 MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 GCS = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -128,7 +128,7 @@ def test_an_interrupted_upload_leaves_a_mixed_mission() -> None:
 
 
 def test_px4_store_keeps_items_as_px4_does() -> None:
-    """What PX4 v1.16 SITL was seen to return (see urpt_gcs/sitl/store.py)."""
+    """What PX4 v1.16 SITL was seen to return (see urpt_gcs/sim/store.py)."""
     store = MissionStore(Home(0, 0, 0.0), capacity=10, px4=True)
     transfer = MissionTransfer(store, MAV)
     (request,) = transfer.handle(_received(GCS.mission_count_encode(1, 1, 4, 0)), 0.0)
@@ -262,8 +262,8 @@ def test_a_leg_takes_what_the_estimate_charges(east_m: float) -> None:
     """Climb, one leg from rest to rest (long enough to cruise, or not) and the hold, on the
     simulator and in the plan's flight model. The simulator arms and starts at once and
     holds on arrival, so the estimate's start and its settling at a stop are left out."""
-    from urpt_gcs.mission import GeoPoint, MissionSettings, build_mission
-    from urpt_gcs.planner import PlanSettings, flight_model
+    from urpt_gcs.flight.mission import GeoPoint, MissionSettings, build_mission
+    from urpt_gcs.pipeline.planner import PlanSettings, flight_model
 
     home = GeoPoint(47.3977420, 8.5455940, 488.0)
     lon = home.lon_deg + math.degrees(east_m / (6_378_137.0 * math.cos(math.radians(47.397742))))
@@ -288,7 +288,7 @@ def test_a_second_auto_forgets_the_first_missions_speed() -> None:
 
 
 def test_rtl_climbs_to_rtl_alt_flies_home_and_lands() -> None:
-    from urpt_gcs.mission import GeoPoint, MissionSettings, build_mission
+    from urpt_gcs.flight.mission import GeoPoint, MissionSettings, build_mission
 
     home = GeoPoint(47.3977420, 8.5455940, 488.0)
     mission = build_mission(home, [(47.3977420, 8.5469240)], 5.0, MissionSettings())  # 100 m E
@@ -458,7 +458,7 @@ def test_replay_verdict_agrees_with_the_independent_checker() -> None:
     (its own raster reading, interpolation and geodesy)."""
     from independent import load_raster, sees
 
-    from urpt_gcs.targets import read_targets
+    from urpt_gcs.site.targets import read_targets
 
     targets = {t.name: t for t in read_targets(DEMO / "targets.kml").targets}
     report = replay(
@@ -510,7 +510,7 @@ def test_bad_simulator_flags_are_one_line() -> None:
 
 def test_replay_on_an_external_vehicle_over_tcp() -> None:
     """--connect: the vehicle runs elsewhere and listens on TCP, as ArduPilot's SITL on 5760."""
-    from urpt_gcs.sitl.server import SitlServer
+    from urpt_gcs.sim.server import SitlServer
 
     mission = demo_mission()
     port = free_tcp_port()
@@ -635,7 +635,7 @@ def test_brake_is_not_armable_as_on_arducopter() -> None:
 def test_two_replays_in_a_row_on_one_vehicle() -> None:
     """After the first flight the copter is left in AUTO; the second must still arm (MAVSDK's
     arm() would switch AUTO to BRAKE, where ArduCopter refuses)."""
-    from urpt_gcs.sitl.server import SitlServer
+    from urpt_gcs.sim.server import SitlServer
 
     mission = demo_mission()
     port = free_tcp_port()
@@ -652,7 +652,7 @@ def test_two_replays_in_a_row_on_one_vehicle() -> None:
 
 
 def test_the_report_names_the_simulated_copter() -> None:
-    from urpt_gcs.sitl.judge import report_text
+    from urpt_gcs.replay.judge import report_text
 
     report = replay(
         DEMO / "site.tif", DEMO / "targets.kml", DEMO_PLAN, ReplaySettings(speedup=200.0)
@@ -676,7 +676,7 @@ def test_px4_start_is_asked_again_while_denied(
     from pymavlink.dialects.v20 import ardupilotmega as mav
 
     from urpt_gcs.errors import LinkError
-    from urpt_gcs.sitl import replay as r
+    from urpt_gcs.replay import fly as r
 
     sent: list[int] = []
     arms = [0]

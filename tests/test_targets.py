@@ -1,4 +1,4 @@
-"""Tests for urpt_gcs.targets: reading target files and rejecting bad ones."""
+"""Tests for urpt_gcs.site.targets: reading target files and rejecting bad ones."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from urpt_gcs.errors import TargetsError
-from urpt_gcs.targets import Target, TargetSet, read_targets
+from urpt_gcs.site.targets import Target, TargetSet, read_targets
 
 DATA = Path(__file__).parent / "data"
 TARGETS = DATA / "targets"

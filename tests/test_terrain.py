@@ -15,9 +15,8 @@ from rasterio.transform import from_origin
 from rasterio.windows import Window
 
 from urpt_gcs.errors import DemError
-from urpt_gcs.planner import PlanSettings, plan
-from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.terrain import (
+from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.site.terrain import (
     check_elevations,
     open_dem,
     planning_crs,
@@ -25,6 +24,7 @@ from urpt_gcs.terrain import (
     scale_error,
     vertical_unit,
 )
+from urpt_gcs.solvers import SolveSettings
 
 ORIGIN = (500_000.0, 5_200_000.0)
 

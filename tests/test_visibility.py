@@ -11,8 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.terrain import open_dem, read_terrain
-from urpt_gcs.visibility import Camera, azimuths, line_of_sight, ray_reach, visibility_regions
+from urpt_gcs.site.terrain import open_dem, read_terrain
+from urpt_gcs.visibility.regions import (
+    Camera,
+    azimuths,
+    line_of_sight,
+    ray_reach,
+    visibility_regions,
+)
 
 ORIGIN = (500_000.0, 5_200_000.0)
 RES = 0.5
@@ -226,7 +232,7 @@ def test_ray_walk_takes_every_sample_that_matters(seed: int) -> None:
     down to rounding, so the terrain here has none; nodata has its own test above.)"""
     from rasterio.transform import Affine
 
-    from urpt_gcs.terrain import Terrain
+    from urpt_gcs.site.terrain import Terrain
 
     rng = np.random.default_rng(seed)
     z = 100.0 + rng.gamma(0.6, 4.0, (90, 110))

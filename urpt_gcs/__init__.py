@@ -22,7 +22,7 @@ configure_numba_cache()
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
-    from urpt_gcs.planner import Plan, PlanSettings, plan
+    from urpt_gcs.pipeline.planner import Plan, PlanSettings, plan
 
 __all__ = ["Plan", "PlanSettings", "UrptError", "__version__", "plan"]
 _FROM_PLANNER = frozenset({"Plan", "PlanSettings", "plan"})
@@ -32,7 +32,7 @@ def __getattr__(name: str) -> Any:
     # PEP 562: the first `urpt_gcs.plan` imports the planner; Python caches nothing here, so
     # the names are bound into the module to make later look-ups ordinary ones.
     if name in _FROM_PLANNER:
-        from urpt_gcs import planner
+        from urpt_gcs.pipeline import planner
 
         for exported in _FROM_PLANNER:
             globals()[exported] = getattr(planner, exported)

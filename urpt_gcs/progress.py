@@ -22,7 +22,7 @@ _BAR = 24
 
 
 class StageProgress:
-    """Callable progress sink for :func:`urpt_gcs.planner.plan`; use as a context manager.
+    """Callable progress sink for :func:`urpt_gcs.pipeline.planner.plan`; use as a context manager.
 
     Parameters
     ----------

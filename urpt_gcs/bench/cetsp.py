@@ -23,9 +23,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from urpt_gcs.cluster import map_jobs
+from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.outputs.output import write_all
+from urpt_gcs.files.output import write_all
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import solve_regions
 from urpt_gcs.solvers.regions import RegionSet
@@ -172,7 +172,7 @@ def instance_paths(
 
 def instance_job(job: tuple[Path, Published], settings: SolveSettings) -> Row:
     """Solve and bound one instance file (with its published figures), as a job for
-    :func:`urpt_gcs.cluster.map_jobs`."""
+    :func:`urpt_gcs.batch.cluster.map_jobs`."""
     path, published = job
     regions = read_instance(path)
     started = time.perf_counter()
@@ -206,7 +206,7 @@ def run_cetsp(
     ``min_discs`` to ``max_discs`` discs); write ``results.csv`` to ``out_dir``. Each
     instance's order search runs ``threads`` searches side by side.
 
-    With a Dask ``client`` (:func:`urpt_gcs.cluster.open_client`) every instance is a task;
+    With a Dask ``client`` (:func:`urpt_gcs.batch.cluster.open_client`) every instance is a task;
     the rows are the ones a serial run gives (the seed is fixed) but for the times, as far as
     the time limit lets each search go equally far.
     """

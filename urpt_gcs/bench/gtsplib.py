@@ -22,11 +22,11 @@ import numpy as np
 
 from urpt_gcs.bench import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.gtsp import Instance
-from urpt_gcs.inputs import GTSPLIB_MAX_BYTES, read_capped
-from urpt_gcs.outputs.formats.gtsplib import BENCH_FLAG, read_gtsplib
-from urpt_gcs.outputs.output import write_all
+from urpt_gcs.files.formats.gtsplib import BENCH_FLAG, read_gtsplib
+from urpt_gcs.files.output import write_all
+from urpt_gcs.site.inputs import GTSPLIB_MAX_BYTES, read_capped
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
+from urpt_gcs.visibility.cover import Instance
 
 __all__ = ["Row", "bench_solvers", "format_table", "results_csv", "run_gtsplib", "tour_cost"]
 

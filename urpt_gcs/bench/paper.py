@@ -31,18 +31,18 @@ import numpy as np
 import pyproj
 from affine import Affine
 
+from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.bench import rows_csv
-from urpt_gcs.certificate import Certificate, certify, finer_stars, outer_regions
-from urpt_gcs.cluster import map_jobs
-from urpt_gcs.gtsp import Covers, Instance, build_instance
-from urpt_gcs.outputs.output import write_all
-from urpt_gcs.refinement import Site, refine_along, refine_tour
+from urpt_gcs.bound.certificate import Certificate, certify, finer_stars, outer_regions
+from urpt_gcs.files.output import write_all
+from urpt_gcs.flight.refinement import Site, refine_along, refine_tour
+from urpt_gcs.site.terrain import FloatArray, Terrain
 from urpt_gcs.solvers import SOLVERS, SolveSettings, Tour, solve
 from urpt_gcs.solvers.approx import paper_path
 from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.solvers.exact import solve_exact
-from urpt_gcs.terrain import FloatArray, Terrain
-from urpt_gcs.visibility import Camera, visibility_regions
+from urpt_gcs.visibility.cover import Covers, Instance, build_instance
+from urpt_gcs.visibility.regions import Camera, visibility_regions
 
 SIZE = 200.0
 GRID = 10
@@ -262,7 +262,7 @@ def _terrain(seed: int) -> Terrain:
 def instance_job(
     key: Key, heuristic_s: float, bound_s: float = BOUND_S, bound_gap: float = BOUND_GAP
 ) -> Row:
-    """One study instance, as a job for :func:`urpt_gcs.cluster.map_jobs`."""
+    """One study instance, as a job for :func:`urpt_gcs.batch.cluster.map_jobs`."""
     t, m, fov, d = key
     return run_instance(t, _terrain(t), m, fov, d, heuristic_s, bound_s, bound_gap)
 
@@ -279,7 +279,7 @@ def run_paper(
 ) -> list[Row]:
     """Run the study (or its quick subset); write ``out_dir/results.csv`` if given.
 
-    With a Dask ``client`` (:func:`urpt_gcs.cluster.open_client`) every instance is a task;
+    With a Dask ``client`` (:func:`urpt_gcs.batch.cluster.open_client`) every instance is a task;
     the rows are the same as run here (every seed is fixed), but for the times. ``grid``
     replaces the study's instances; ``bound_s`` is each instance's time for the certified
     bound, which tightens its stars only while the gap is above ``bound_gap`` (a share).

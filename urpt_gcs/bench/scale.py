@@ -242,7 +242,7 @@ def _peak_rss_mb() -> float:
 
 
 def _plan_child(dem: str, targets: str, options: dict[str, Any], out: Any) -> None:
-    from urpt_gcs.planner import PlanSettings, plan
+    from urpt_gcs.pipeline.planner import PlanSettings, plan
 
     start = time.perf_counter()
     try:
@@ -332,7 +332,7 @@ def run_scale(
     seed
         Seed of the sites.
     plan_options
-        Keyword arguments of :class:`urpt_gcs.planner.PlanSettings`.
+        Keyword arguments of :class:`urpt_gcs.pipeline.planner.PlanSettings`.
     progress
         Called with a line as each run starts and ends.
 

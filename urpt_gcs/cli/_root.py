@@ -19,8 +19,8 @@ import click
 
 from urpt_gcs import __version__
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.geofence import Geofence
-from urpt_gcs.mission import Mission
+from urpt_gcs.flight.geofence import Geofence
+from urpt_gcs.flight.mission import Mission
 
 INTERRUPTED_EXIT = 130  # 128 + SIGINT
 
@@ -105,7 +105,7 @@ def upload_and_report(
 ) -> None:
     """Upload with a verified read-back (the mission, then its geofence if it has one); one
     line each on success, exit 1 on failure."""
-    from urpt_gcs.drone.link import upload
+    from urpt_gcs.vehicle.link import upload
 
     progress = terminal_progress()
     try:

@@ -38,7 +38,8 @@ def batch_command(
     jobs_file: Path, out: Path, scheduler: str | None, workers: int | None, quiet: bool
 ) -> None:
     """Plan every site of JOBS.toml (and its sweeps); each job's folder is what plan writes."""
-    from urpt_gcs.batch import (
+    from urpt_gcs.batch.cluster import describe_client, open_client
+    from urpt_gcs.batch.jobs import (
         Row,
         check_inputs,
         output_folders,
@@ -46,7 +47,6 @@ def batch_command(
         run_batch,
         summary_table,
     )
-    from urpt_gcs.cluster import describe_client, open_client
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the local cluster: not with --scheduler")

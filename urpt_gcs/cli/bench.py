@@ -94,7 +94,7 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
     if scheduler is None and workers is None:
         yield None
         return
-    from urpt_gcs.cluster import describe_client, open_client
+    from urpt_gcs.batch.cluster import describe_client, open_client
 
     with open_client(scheduler, workers) as client:
         click.echo(f"running on {describe_client(client)}", err=True)

@@ -9,18 +9,18 @@ from typing import TYPE_CHECKING, TextIO
 
 import click
 
-from urpt_gcs.camera import CAMERAS, frame_from_flags
 from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
-from urpt_gcs.drone.link import DEFAULT_URL
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.mission import FIRMWARES, MissionSettings
-from urpt_gcs.planner import PlanSettings
+from urpt_gcs.flight.mission import FIRMWARES, MissionSettings
+from urpt_gcs.pipeline.planner import PlanSettings
 from urpt_gcs.progress import StageProgress
+from urpt_gcs.site.camera import CAMERAS, frame_from_flags
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
-from urpt_gcs.visibility import DEFAULT_HEADINGS
+from urpt_gcs.vehicle.link import DEFAULT_URL
+from urpt_gcs.visibility.regions import DEFAULT_HEADINGS
 
 if TYPE_CHECKING:
-    from urpt_gcs.fleet import FleetSettings
+    from urpt_gcs.pipeline.fleet import FleetSettings
 
 
 @main.command("plan")
@@ -275,9 +275,9 @@ def plan_command(
     retries: int,
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
-    from urpt_gcs.outputs.products import check_extra, check_out, write_products
-    from urpt_gcs.outputs.report import summary_text
-    from urpt_gcs.planner import plan
+    from urpt_gcs.files.products import check_extra, check_out, write_products
+    from urpt_gcs.files.report import summary_text
+    from urpt_gcs.pipeline.planner import plan
 
     try:
         fleet = _fleet(vehicles, fleet_file, separation, layer_spacing, min_separation)
@@ -353,7 +353,7 @@ def plan_command(
         with StageProgress(stream, time_limit, live=live) as progress:
             say = None if quiet or as_json else progress
             if auto:
-                from urpt_gcs.altitude import best_altitude
+                from urpt_gcs.pipeline.altitude import best_altitude
 
                 result = best_altitude(
                     Path(dem), Path(targets), settings, altitude_steps, progress=say
@@ -364,7 +364,7 @@ def plan_command(
                 say("writing outputs")
             also = []
             if export_gtsp is not None and export is not None:
-                from urpt_gcs.outputs.formats.gtsplib import write_gtsplib
+                from urpt_gcs.files.formats.gtsplib import write_gtsplib
 
                 comment = f"urpt-gcs plan of {Path(targets).name}"
                 text = write_gtsplib(result.instance, export_gtsp.stem, comment)
@@ -384,7 +384,7 @@ def plan_command(
                 "urpt-gcs upload after each landing",
                 err=True,
             )
-        from urpt_gcs.geofence import Geofence
+        from urpt_gcs.flight.geofence import Geofence
 
         fence = Geofence.inclusion(result.geofence_latlon)
         upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json, fence)
@@ -398,7 +398,7 @@ def _fleet(
     min_separation: float,
 ) -> FleetSettings | None:
     """The fleet the flags ask for; None for one vehicle without --fleet (the plain plan)."""
-    from urpt_gcs.fleet import FleetSettings, VehicleSpec, read_fleet
+    from urpt_gcs.pipeline.fleet import FleetSettings, VehicleSpec, read_fleet
 
     if vehicles < 1:
         raise SettingsError(f"--vehicles {vehicles} is below 1: give how many vehicles fly")
@@ -435,12 +435,12 @@ def _plan_fleet(
     quiet: bool,
     stream: TextIO,
 ) -> None:
-    from urpt_gcs.fleet import plan_fleet_mission
-    from urpt_gcs.outputs.fleet_output import (
+    from urpt_gcs.files.fleet_output import (
         check_fleet_out,
         fleet_summary_text,
         write_fleet_products,
     )
+    from urpt_gcs.pipeline.fleet import plan_fleet_mission
 
     destinations = check_fleet_out(out, len(fleet.vehicles))
     live = sys.stderr.isatty()
@@ -467,7 +467,7 @@ def _plan_fleet(
 @click.option("--seed", type=int, default=7, show_default=True)
 def demo_site_command(out: str, seed: int) -> None:
     """Generate the demo site: a Pix4D-like DSM and a KML of targets."""
-    from urpt_gcs.demo import make_demo_site
+    from urpt_gcs.site.demo import make_demo_site
 
     try:
         site = make_demo_site(Path(out), seed=seed)

@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING
 import click
 
 from urpt_gcs.cli._root import fail, main, terminal_progress, upload_and_report
-from urpt_gcs.drone.link import DEFAULT_URL
 from urpt_gcs.errors import SettingsError, UrptError
+from urpt_gcs.vehicle.link import DEFAULT_URL
 
 if TYPE_CHECKING:
-    from urpt_gcs.sitl.replay import ReplaySettings
+    from urpt_gcs.replay.fly import ReplaySettings
 
 
 @main.command("upload")
@@ -76,7 +76,7 @@ def upload_command(
     A .plan's geofence goes up after the mission, as a fence mission, and is read back too.
     With --fleet, each vehicle of a fleet plan gets its own mission, verified on its own.
     """
-    from urpt_gcs.sitl.replay import read_fence, read_mission
+    from urpt_gcs.replay.fly import read_fence, read_mission
 
     if fleet_dir is not None:
         if mission_file is not None:
@@ -108,9 +108,9 @@ def _upload_fleet(
     retries: int,
     timeout: float,
 ) -> None:
-    from urpt_gcs.drone.fleet_upload import parse_system_ids, report_lines, upload_fleet
-    from urpt_gcs.drone.link import UploadSettings
-    from urpt_gcs.outputs.fleet_folder import read_fleet
+    from urpt_gcs.files.fleet_folder import read_fleet
+    from urpt_gcs.vehicle.fleet_upload import parse_system_ids, report_lines, upload_fleet
+    from urpt_gcs.vehicle.link import UploadSettings
 
     try:
         fleet = read_fleet(folder)
@@ -186,7 +186,7 @@ def sitl_group(
     """
     if ctx.invoked_subcommand is not None:
         return
-    from urpt_gcs.sitl import SitlServer, VehicleSettings, parse_home
+    from urpt_gcs.sim import SitlServer, VehicleSettings, parse_home
 
     try:
         settings = VehicleSettings(
@@ -305,10 +305,10 @@ def sitl_replay_command(
     Each sortie is checked on the targets it was planned to photograph; several sorties are
     also checked together on every target of --targets.
     """
-    from urpt_gcs.sitl.ardupilot_sitl import ENV_VAR, resolve_binary
-    from urpt_gcs.sitl.judge import report_text, set_report_text
-    from urpt_gcs.sitl.px4_sitl import find_build
-    from urpt_gcs.sitl.replay import ReplaySettings, mission_files, replay, replay_set
+    from urpt_gcs.replay.ardupilot import ENV_VAR, resolve_binary
+    from urpt_gcs.replay.fly import ReplaySettings, mission_files, replay, replay_set
+    from urpt_gcs.replay.judge import report_text, set_report_text
+    from urpt_gcs.replay.px4 import find_build
 
     progress = terminal_progress()
     try:
@@ -361,8 +361,8 @@ def _replay_fleet(
     settings: ReplaySettings,
     progress: Callable[[str], None] | None,
 ) -> None:
-    from urpt_gcs.outputs.fleet_folder import read_fleet
-    from urpt_gcs.sitl.fleet import fleet_report_text, replay_fleet
+    from urpt_gcs.files.fleet_folder import read_fleet
+    from urpt_gcs.replay.fleet import fleet_report_text, replay_fleet
 
     report = replay_fleet(dem, targets, read_fleet(folder), settings, progress)
     for warning in (w for r in report.together.reports for w in r.expected.warnings):

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.gtsp import Covers, Geometry, Instance
+from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers.base import (
     DISC_PACKING_ALPHA,
     SolveSettings,
@@ -43,7 +43,7 @@ from urpt_gcs.solvers.base import (
     geometric_lower_bound,
     greedy_disjoint,
 )
-from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility.cover import Covers, Geometry, Instance
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72

@@ -5,12 +5,12 @@ shortest tour it finds that enters every region together with a certified lower 
 *every* such tour, not only those through its candidate points:
 
 1. discretise: candidate points on every region's boundary (and one inside), each covering
-   every region it lies in -- a generalized TSP (:class:`urpt_gcs.gtsp.Instance`);
+   every region it lies in -- a generalized TSP (:class:`urpt_gcs.visibility.cover.Instance`);
 2. solve it with the GTSP solvers (:mod:`urpt_gcs.solvers`);
 3. refine the tour continuously with the order fixed (:mod:`urpt_gcs.solvers.refine`); for
    polygons, solve again with the refined points among the candidates and refine again;
    for discs, search the order continuously from many starts (:func:`_search_starts`);
-4. bound it (:mod:`urpt_gcs.solvers.bound`).
+4. bound it (:mod:`urpt_gcs.bound.lower_bound`).
 """
 
 from __future__ import annotations
@@ -24,14 +24,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from urpt_gcs.bound.lower_bound import Bound, lower_bound
 from urpt_gcs.errors import PlanError
-from urpt_gcs.gtsp import Instance, IntArray
+from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers import disc_tour, solve
 from urpt_gcs.solvers.base import SolveSettings, Tour
-from urpt_gcs.solvers.bound import Bound, lower_bound
 from urpt_gcs.solvers.refine import closed_length, refine_touches
 from urpt_gcs.solvers.regions import RegionSet
-from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility.cover import Instance, IntArray
 
 # Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
 # _MIN_DISC_SAMPLES each).

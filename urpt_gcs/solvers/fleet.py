@@ -27,10 +27,10 @@ import numpy as np
 import numpy.typing as npt
 
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.gtsp import Covers, Geometry, Instance
-from urpt_gcs.safety import FlightModel, split_sorties
+from urpt_gcs.flight.safety import FlightModel, split_sorties
+from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers.base import SolveSettings
-from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility.cover import Covers, Geometry, Instance
 
 IntArray = npt.NDArray[np.int64]
 

@@ -18,9 +18,9 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point
 
-from urpt_gcs.gtsp import IntArray
+from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers.regions import RegionSet
-from urpt_gcs.terrain import FloatArray
+from urpt_gcs.visibility.cover import IntArray
 
 # Sweeps stop once one gains less than this fraction of the tour.
 _SWEEP_GAIN = 1e-10

@@ -16,7 +16,6 @@ import numpy as np
 from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.gtsp import Instance
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.clustered import (
     Clustered,
@@ -25,6 +24,7 @@ from urpt_gcs.solvers.clustered import (
     require_partition_memory,
     viewpoint_order,
 )
+from urpt_gcs.visibility.cover import Instance
 
 # Routing needs integer arc costs; scale so that centimetres (or GTSPLIB units) survive.
 _SCALE = 100.0

@@ -1,0 +1,1 @@
+"""The certified lower bound: relaxations of the continuous problem that no flight beats."""

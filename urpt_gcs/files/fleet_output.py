@@ -1,0 +1,202 @@
+"""A fleet plan's files: one ordinary plan folder per vehicle and the fleet's own summary.
+
+``OUT/vehicle_k/`` holds exactly what ``plan --out`` writes for vehicle k alone (so
+``upload`` and ``sitl replay --plan`` work on it unchanged); ``OUT/summary.json`` holds the
+``fleet`` block (every vehicle's layer, home, speed, flight time, length, sorties, targets and
+start delay; the makespan, its lower bound and gap; the separation and the planned closest
+approach), and ``OUT/map.png``, ``OUT/plan.kml`` and ``OUT/plan.geojson`` show every vehicle
+in its own colour. Everything is committed as one set: all of it appears, or none.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from urpt_gcs.files.formats.geo import fleet_geojson, fleet_kml
+from urpt_gcs.files.output import Destination, commit
+from urpt_gcs.files.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
+from urpt_gcs.pipeline.fleet import FleetPlan
+
+
+def vehicle_dir(number: int) -> str:
+    return f"vehicle_{number}"
+
+
+def check_fleet_out(out_dir: Path, vehicles: int) -> list[Destination]:
+    """Refuse, before any planning, an ``--out`` the fleet's files cannot be committed to;
+    the vehicles' folders first, then the top folder (the order they are committed in)."""
+    top = check_out(out_dir)
+    return [*(check_out(out_dir / vehicle_dir(k)) for k in range(1, vehicles + 1)), top]
+
+
+def _round(x: float | None, digits: int = 2) -> float | None:
+    return None if x is None or not math.isfinite(x) else round(x, digits)
+
+
+def fleet_summary(fleet: FleetPlan, files: list[str]) -> dict[str, Any]:
+    """What the top-level ``summary.json`` holds."""
+    sep = fleet.separation
+    closest = sep.closest
+    vehicles = []
+    for number, (plan, delay, finish) in enumerate(
+        zip(fleet.plans, sep.start_delays_s, fleet.finish_s, strict=True), start=1
+    ):
+        vehicles.append(
+            {
+                "vehicle": number,
+                "dir": vehicle_dir(number),
+                "altitude_m": round(plan.camera.altitude_m, 2),
+                "altitude_above_home_m": round(plan.altitude_rel_m, 2),
+                "home_lat": plan.mission.home.lat_deg,
+                "home_lon": plan.mission.home.lon_deg,
+                "speed_m_s": plan.settings.mission.cruise_speed_m_s,
+                "endurance_min": plan.settings.endurance_min,
+                "flight_time_s": round(plan.flight_time_s, 1),
+                "start_delay_s": delay,
+                "finish_s": round(finish, 1),
+                "length_m": round(plan.flown_length_m, 2),
+                "sorties": len(plan.sorties),
+                "stops": len(plan.tour.order),
+                "targets": [t.name for t in plan.targets.targets],
+            }
+        )
+    bound = fleet.bound
+    return {
+        "fleet": {
+            "vehicles": vehicles,
+            "makespan_s": round(fleet.makespan_s, 1),
+            "makespan_bound_s": round(bound.bound_s, 1),
+            "makespan_gap_pct": _round(100.0 * fleet.gap),
+            "bound": {
+                "reach_s": round(bound.reach_s, 1),
+                "share_s": round(bound.share_s, 1),
+                "pigeonhole_s": round(bound.pigeonhole_s, 1),
+            },
+            # The naive split: the single-vehicle tour cut into K contiguous pieces, each
+            # piece's tour solved again on its own vehicle's layer (the search's start); and
+            # the pieces flown exactly as cut, on the single tour's layer.
+            "naive_split_makespan_s": round(max(fleet.tours.start_times_s), 1),
+            "naive_cut_makespan_s": round(fleet.tours.naive_makespan_s, 1),
+            "search": {
+                "moves": fleet.tours.moves,
+                "resolves": fleet.tours.resolves,
+                "search_s": round(fleet.tours.search_s, 3),
+            },
+            "single_vehicle": {
+                "length_m": round(fleet.single_length_m, 2),
+                "flight_time_s": round(fleet.single_flight_time_s, 1),
+            },
+            "separation": {
+                "mode": sep.mode,
+                "layer_spacing_m": sep.layer_spacing_m,
+                "min_m": sep.min_m,
+                "closest_approach_m": None if closest is None else round(closest.distance_m, 2),
+                "closest_horizontal_m": _round(sep.closest_horizontal_m),
+                "closest_vehicles": None if closest is None else list(closest.vehicles),
+                "closest_at_s": None if closest is None else round(closest.at_s, 1),
+                "closest_lat": None if sep.closest_latlon is None else sep.closest_latlon[0],
+                "closest_lon": None if sep.closest_latlon is None else sep.closest_latlon[1],
+                "start_delays_s": list(sep.start_delays_s),
+                "timing_slack_s": round(sep.timing_slack_s, 1),
+            },
+        },
+        "targets": sum(len(p.targets.targets) for p in fleet.plans),
+        "timings_s": {k: round(v, 3) for k, v in fleet.timings_s.items()},
+        "warnings": [
+            f"vehicle {number}: {w}"
+            for number, plan in enumerate(fleet.plans, start=1)
+            for w in plan.warnings
+        ],
+        "files": files,
+    }
+
+
+def _minutes(seconds: float) -> str:
+    m, s = divmod(round(seconds), 60)
+    return f"{m} min {s:02d} s"
+
+
+def fleet_summary_text(data: dict[str, Any]) -> str:
+    """One screen of text from :func:`fleet_summary`'s dictionary."""
+    f = data["fleet"]
+    sep = f["separation"]
+    gap = "no bound" if f["makespan_gap_pct"] is None else f"gap {f['makespan_gap_pct']:.1f} %"
+    count = len(f["vehicles"])
+    lines = [
+        f"fleet          {count} vehicle{'s' if count != 1 else ''}, {data['targets']} targets",
+        f"makespan       {_minutes(f['makespan_s'])} (last landing); lower bound "
+        f"{_minutes(f['makespan_bound_s'])}, {gap}",
+        f"naive split    {_minutes(f['naive_split_makespan_s'])} (the single-vehicle tour "
+        f"cut into {count} piece{'s' if count != 1 else ''}); one vehicle alone "
+        f"{_minutes(f['single_vehicle']['flight_time_s'])}",
+        "vehicle  layer (m)  above home  start  flight        length     sorties  targets",
+    ]
+    for v in f["vehicles"]:
+        names = ", ".join(v["targets"][:5]) + (", ..." if len(v["targets"]) > 5 else "")
+        lines.append(
+            f"  {v['vehicle']:<6d}{v['altitude_m']:9.1f}{v['altitude_above_home_m']:11.1f} m"
+            f"{v['start_delay_s']:6.0f} s  {_minutes(v['flight_time_s']):>12s}"
+            f"{v['length_m']:9.0f} m{v['sorties']:7d}    {len(v['targets'])}: {names}"
+        )
+    if sep["mode"] == "altitude":
+        how = f"altitude layers {sep['layer_spacing_m']:g} m apart"
+    else:
+        how = f"one layer, at least {sep['min_m']:g} m apart horizontally along the tracks"
+    closest = (
+        "never in the air together"
+        if sep["closest_approach_m"] is None
+        else f"closest approach {sep['closest_approach_m']:.1f} m (horizontally "
+        f"{sep['closest_horizontal_m']:.1f} m) between vehicles {sep['closest_vehicles'][0]} "
+        f"and {sep['closest_vehicles'][1]} at {sep['closest_at_s']:.0f} s, with either "
+        f"up to {sep['timing_slack_s']:g} s early or late"
+    )
+    lines.append(f"separation     {how}; {closest}")
+    delayed = [(k, d) for k, d in enumerate(sep["start_delays_s"], start=1) if d > 0]
+    if delayed:
+        lines.append(
+            "start delays   "
+            + ", ".join(f"vehicle {k} {d:g} s" for k, d in delayed)
+            + " after the first take-off (to keep the separation)"
+        )
+    lines += [f"warning        {w}" for w in data["warnings"]]
+    if data["files"]:
+        lines.append("files          " + "\n               ".join(data["files"]))
+    return "\n".join(lines)
+
+
+def write_fleet_products(
+    fleet: FleetPlan, destinations: list[Destination], with_map: bool = True
+) -> dict[str, Any]:
+    """Write every vehicle's folder and the fleet's files as one set; return the summary.
+
+    ``destinations`` are :func:`check_fleet_out`'s. Raises OutputError with every destination
+    as it was when a file cannot be written.
+    """
+    *folders, top = destinations
+    writes: list[tuple[Destination, dict[str, str | bytes]]] = []
+    listed: list[str] = []
+    for plan, dest in zip(fleet.plans, folders, strict=True):
+        _, files = render_products(plan, dest.folder, with_map)
+        writes.append((dest, files))
+        listed += [str(dest.folder / name) for name in files]
+    own = {"plan.kml": fleet_kml(fleet.plans), "plan.geojson": fleet_geojson(fleet.plans)}
+    names = [*own, SUMMARY_FILE] + ([MAP_FILE] if with_map else [])
+    data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed)
+    top_files: dict[str, str | bytes] = {**own, SUMMARY_FILE: json.dumps(data, indent=2) + "\n"}
+    if with_map:
+        from urpt_gcs.files.mapview import render_fleet_map
+
+        f = data["fleet"]
+        gap = "" if f["makespan_gap_pct"] is None else f", gap {f['makespan_gap_pct']:.1f} %"
+        title = (
+            f"{len(fleet.plans)} vehicles, {data['targets']} targets: makespan "
+            f"{f['makespan_s'] / 60:.1f} min (bound {f['makespan_bound_s'] / 60:.1f} min{gap})\n"
+            f"separation: {f['separation']['mode']}, closest approach "
+            f"{f['separation']['closest_approach_m']} m"
+        )
+        top_files[MAP_FILE] = render_fleet_map(fleet.plans, title)
+    commit([*writes, (top, top_files)])
+    return data

@@ -1,0 +1,458 @@
+"""Report: the plan summarised for the operator, as a screen of text and as JSON."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from urpt_gcs.bound.certificate import PROVEN_GAP
+from urpt_gcs.flight.mission import Mission, photo_headings
+from urpt_gcs.pipeline.planner import Plan
+
+
+def _round(x: float, digits: int = 2) -> float | None:
+    return round(x, digits) if math.isfinite(x) else None
+
+
+# Bright colours that stand apart on a grey hillshade and in Google Earth's imagery, one per
+# sortie in turn; the map, KML and GeoJSON share them.
+SORTIE_COLOURS = (
+    "#ffd400",
+    "#00b4ff",
+    "#ff3fa4",
+    "#5ce65c",
+    "#ff8c1a",
+    "#a77dff",
+    "#00e0c0",
+    "#ff4040",
+)
+
+
+def sortie_colour(number: int) -> str:
+    """The ``#rrggbb`` colour of sortie ``number`` (from 1)."""
+    return SORTIE_COLOURS[(number - 1) % len(SORTIE_COLOURS)]
+
+
+@dataclass(frozen=True, slots=True)
+class FlownStop:
+    """A stop as its sortie's mission flies it: the written waypoint, in flight order."""
+
+    order: int
+    sortie: int
+    lat_deg: float
+    lon_deg: float
+    sees: tuple[str, ...]
+    from_previous_m: float
+    eta_s: float
+
+
+def flown_stops(plan: Plan) -> list[FlownStop]:
+    """Every stop of every sortie with what it sees and when the copter gets there.
+
+    Positions are the missions' NAV_WAYPOINT items, so whatever draws them draws what is
+    flown; ``eta_s`` is from arming, on the plan's :class:`~urpt_gcs.flight.safety.FlightModel`.
+    """
+    tour = plan.tour
+    assert tour.points_xy is not None
+    names = [t.name for t in plan.targets.targets]
+    model = plan.flight_model
+    waypoints = [latlon for m in plan.missions for latlon in _waypoint_items(m)]
+    stops = []
+    for number, sortie in enumerate(plan.sorties, start=1):
+        previous = np.asarray(plan.home_xy)
+        eta = model.takeoff_s(plan.altitude_rel_m)
+        for k in range(sortie.first, sortie.stop):
+            xy = tour.points_xy[k]
+            hop = float(np.hypot(*(xy - previous)))
+            eta += float(model.leg_s(hop))
+            stops.append(
+                FlownStop(
+                    order=k + 1,
+                    sortie=number,
+                    lat_deg=waypoints[k][0],
+                    lon_deg=waypoints[k][1],
+                    sees=tuple(names[t] for t in np.flatnonzero(tour.sees[k]).tolist()),
+                    from_previous_m=round(hop, 2),
+                    eta_s=round(eta, 1),
+                )
+            )
+            eta += model.stop_s
+            previous = xy
+    return stops
+
+
+def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
+    """The plan's key figures; what ``summary.json`` holds."""
+    tour = plan.tour
+    inst = plan.instance
+    names = [t.name for t in plan.targets.targets]
+    stops = [
+        {
+            "order": stop.order,
+            "sortie": stop.sortie,
+            "lat_deg": stop.lat_deg,
+            "lon_deg": stop.lon_deg,
+            "sees": list(stop.sees),
+            "from_previous_m": stop.from_previous_m,
+            "eta_s": stop.eta_s,
+        }
+        for stop in flown_stops(plan)
+    ]
+    sorties = [
+        {
+            "sortie": n,
+            "stops": s.stop - s.first,
+            "length_m": round(s.length_m, 2),
+            "flight_time_s": round(s.flight_time_s, 1),
+        }
+        for n, s in enumerate(plan.sorties, start=1)
+    ]
+    return {
+        "targets": len(names),
+        "target_names": names,
+        "viewpoints": inst.n_viewpoints,
+        "tour_stops": len(tour.order),
+        # What is flown: every sortie from home and back, added up (the tour itself with one
+        # sortie). The bound holds for it: sorties joined at home are one closed tour.
+        "tour_length_m": round(plan.flown_length_m, 3),
+        # Certified for every flight from home that photographs every target, from anywhere
+        # on the plane; rounded down, and the gap up, so that neither claims too much.
+        "lower_bound_m": math.floor(plan.lower_bound_m * 1000.0) / 1000.0,
+        "gap_pct": _round_up(100.0 * plan.flown_gap, 2),
+        "proven_optimal": plan.proven_optimal,
+        "proven_gap_pct": 100.0 * PROVEN_GAP,
+        # The solver's own claim: no tour over the candidate viewpoints is shorter.
+        "optimal_over_candidates": plan.optimal_over_candidates,
+        **_refinement(plan),
+        "bound": _bound(plan),
+        "solver_tour_length_m": round(
+            tour.length if plan.sortie_order is None else plan.sortie_order.tour_length_m, 3
+        ),
+        "solver_proven_optimal": tour.proven_optimal,
+        "sortie_order": _sortie_order(plan),
+        "solver": tour.solver,
+        "solve_s": round(tour.solve_s, 3),
+        "flight_time_s": round(plan.flight_time_s, 1),
+        "altitude_amsl_m": round(plan.camera.altitude_m, 2),
+        "altitude_above_home_m": round(plan.altitude_rel_m, 2),
+        "terrain_max_m": round(plan.terrain_max_m, 2),
+        "fov_deg": plan.camera.fov_deg,
+        "samples": plan.settings.samples,
+        "firmware": plan.mission.firmware,
+        "hold_s": plan.settings.mission.hold_s,
+        "cruise_speed_m_s": plan.settings.mission.cruise_speed_m_s,
+        "home": {
+            "lat_deg": plan.mission.home.lat_deg,
+            "lon_deg": plan.mission.home.lon_deg,
+            "ground_m": round(plan.home_ground_m, 2),
+            "source": plan.home_source,
+        },
+        "dem": {
+            "path": str(plan.dem.path),
+            "crs": plan.crs.to_string(),
+            "cell_m": round(plan.terrain.cell_m, 4),
+            "read_window_px": list(plan.terrain.read_window_px),
+            "source_shape_px": list(plan.terrain.source_shape_px),
+            "source_crs": plan.dem.crs.name,
+            "band": plan.dem.band,
+            "vertical_unit": plan.dem.vertical_unit.name,
+            "vertical_unit_to_m": plan.dem.vertical_unit.to_m,
+            "vertical_unit_declared": plan.dem.vertical_unit.declared,
+            "planned_in_source_crs": plan.crs == plan.dem.horizontal_crs,
+        },
+        "min_clearance_m": plan.settings.min_clearance_m,
+        "min_leg_clearance_m": _round(
+            min((leg.min_clearance_m for leg in plan.legs), default=math.nan)
+        ),
+        "sorties": sorties,
+        "max_agl_m": plan.settings.max_agl_m,
+        "endurance_min": plan.settings.endurance_min,
+        "geofence_vertices": len(plan.geofence_latlon),
+        "stops": stops,
+        "timings_s": {k: round(v, 3) for k, v in plan.timings_s.items()},
+        "warnings": list(plan.warnings),
+        "files": files or [],
+        **_frame_camera(plan),
+        **_altitude_curve(plan),
+    }
+
+
+def _round_up(x: float, digits: int = 2) -> float | None:
+    if not math.isfinite(x):
+        return None
+    scale = 10.0**digits
+    return math.ceil(x * scale - 1e-9) / scale
+
+
+def _refinement(plan: Plan) -> dict[str, Any]:
+    """The solver's tour before and after its stops were moved within their regions."""
+    done = plan.refinement
+    if done is None:
+        return {"discrete_length_m": round(plan.tour.length, 3), "refined_length_m": None}
+    return {
+        "discrete_length_m": round(done.before_m, 3),
+        "refined_length_m": round(done.after_m, 3),
+        "refine_shortened_pct": round(done.shortened_pct, 3),
+        "refine_moves": done.moves,
+        "refine_s": round(done.seconds, 3),
+    }
+
+
+def _bound(plan: Plan) -> dict[str, Any] | None:
+    """How the certified bound was found."""
+    c = plan.certificate
+    if c is None:
+        return None
+    return {
+        "method": c.method,
+        "seconds": round(c.seconds, 3),
+        "sectors": c.sectors,
+        "outer_to_inner_area": _round(c.area_ratio, 3),
+        "holding_m": plan.settings.position_tolerance_m,
+    }
+
+
+def _altitude_curve(plan: Plan) -> dict[str, Any]:
+    """With --altitude auto: each altitude planned, what it flies, and the one kept."""
+    sweep = plan.altitude_sweep
+    if sweep is None:
+        return {}
+    return {
+        "altitude_curve": [
+            {
+                "altitude_amsl_m": p.altitude_m,
+                "tour_length_m": None if p.tour_length_m is None else round(p.tour_length_m, 2),
+                "flight_time_s": None if p.flight_time_s is None else round(p.flight_time_s, 1),
+                "wall_s": round(p.wall_s, 2),
+                "error": p.error,
+            }
+            for p in sweep.points
+        ],
+        "altitude_best_amsl_m": sweep.best_altitude_m,
+        "altitude_sweep_wall_s": round(sweep.wall_s, 2),
+    }
+
+
+def _frame_camera(plan: Plan) -> dict[str, Any]:
+    """A frame camera's figures: the frame, the headings offered, the ground resolution
+    required and reached per target (the finest photo of it), and each photo's heading as
+    the mission gives it. Nothing for the cone."""
+    camera = plan.camera
+    frame = camera.frame
+    if frame is None:
+        return {}
+    tour = plan.tour
+    assert tour.points_xy is not None
+    names = [t.name for t in plan.targets.targets]
+    reached = {}
+    for t, name in enumerate(names):
+        stops = np.flatnonzero(tour.sees[:, t])
+        horizontal = np.hypot(*(tour.points_xy[stops] - plan.targets_xy[t]).T)
+        slant = np.hypot(horizontal, camera.altitude_m - plan.ground_m[t])
+        reached[name] = round(float(frame.gsd_cm(slant.min())), 3)
+    worst = max(reached, key=lambda n: reached[n])
+    headings = [h for m in plan.missions for h in (photo_headings(m) or [])]
+    return {
+        "camera": {
+            "sensor_mm": [frame.sensor_w_mm, frame.sensor_h_mm],
+            "focal_mm": frame.focal_mm,
+            "image_px": [frame.image_w_px, frame.image_h_px],
+            "headings_offered_deg": camera.heading_choices_deg.tolist(),
+            "gsd_cm_required": camera.gsd_cm,
+            "gsd_cm_per_target": reached,
+            "worst_gsd_cm": reached[worst],
+            "worst_gsd_target": worst,
+            "photo_headings_deg": [round(h, 2) for h in headings],
+        }
+    }
+
+
+def _camera_line(data: dict[str, Any]) -> str:
+    camera = data.get("camera")
+    if camera is None:
+        return f"camera         half-angle {data['fov_deg']:g} deg, {data['samples']} azimuths"
+    w, h = camera["sensor_mm"]
+    iw, ih = camera["image_px"]
+    required = camera["gsd_cm_required"]
+    need = "" if required is None else f" (--gsd {required:g})"
+    return (
+        f"camera         {w:g} x {h:g} mm, {camera['focal_mm']:g} mm, {iw} x {ih} px; "
+        f"{len(camera['headings_offered_deg'])} headings, {data['samples']} azimuths\n"
+        f"ground res.    worst {camera['worst_gsd_cm']:.2f} cm/px{need}; per target, coarsest "
+        f"first: {_coarsest(camera['gsd_cm_per_target'])}"
+    )
+
+
+def _coarsest(per_target: dict[str, float], shown: int = 6) -> str:
+    ranked = sorted(per_target.items(), key=lambda kv: -kv[1])
+    text = ", ".join(f"{name} {gsd:.2f}" for name, gsd in ranked[:shown])
+    return text + (f", ... ({len(ranked) - shown} more)" if len(ranked) > shown else "")
+
+
+def _sortie_order(plan: Plan) -> dict[str, Any] | None:
+    """What reordering the stops for the sorties did (None for one sortie)."""
+    found = plan.sortie_order
+    if found is None:
+        return None
+    return {
+        "plain_cut_sorties": found.plain_cut_sorties,
+        "plain_cut_length_m": round(found.plain_cut_length_m, 3),
+        "plain_cut_flight_time_s": round(found.plain_cut_flight_time_s, 1),
+        "length_m": round(found.length_m, 3),
+        "flight_time_s": round(found.flight_time_s, 1),
+        "moves": found.moves,
+        "search_s": round(found.search_s, 3),
+        "budget_s": round(found.budget_s, 3),
+    }
+
+
+def _waypoint_items(mission: Mission) -> list[tuple[float, float]]:
+    return [
+        (item.params[4], item.params[5])
+        for item in mission.items
+        if item.command == mavlink.MAV_CMD_NAV_WAYPOINT
+    ]
+
+
+def _minutes(seconds: float) -> str:
+    m, s = divmod(round(seconds), 60)
+    return f"{m} min {s:02d} s"
+
+
+def _refine_line(data: dict[str, Any]) -> str:
+    if data.get("refined_length_m") is None:
+        return f"refinement     off; the solver's tour is {data['discrete_length_m']:.1f} m"
+    return (
+        f"refinement     stops moved within what they see: {data['discrete_length_m']:.1f} m -> "
+        f"{data['refined_length_m']:.1f} m ({data['refine_shortened_pct']:.2f} % shorter)"
+    )
+
+
+def _dem_line(dem: dict[str, Any]) -> str:
+    unit = str(dem["vertical_unit"])
+    if not dem["vertical_unit_declared"]:
+        heights = "DEM heights in metres (no vertical CRS declared)"
+    elif dem["vertical_unit_to_m"] != 1.0:
+        factor = dem["vertical_unit_to_m"]
+        named = f"{unit[: -len('foot')]}feet" if unit.endswith("foot") else f"{unit} ({factor:g} m)"
+        heights = f"DEM heights in {named}, converted to metres"
+    else:
+        heights = "DEM heights in metres"
+    where = f"planned in {dem['crs']}"
+    if not dem["planned_in_source_crs"]:
+        where += f" (the DEM is in {dem['source_crs']})"
+    return f"dem            {heights}; band {dem['band']}; {where}"
+
+
+def flight_quality(data: dict[str, Any], short: bool = False) -> str:
+    """How far at most the flight is from the shortest possible, in words."""
+    if data["proven_optimal"]:
+        if short:
+            return "proven optimal"
+        return (
+            f"proven optimal (within {data['proven_gap_pct']:g} % of the certified lower bound "
+            f"{data['lower_bound_m']:.1f} m)"
+        )
+    if data["gap_pct"] is None:
+        return "no lower bound" if short else "no lower bound available"
+    if short:
+        return f"within {_percent(data['gap_pct'])} % of the shortest possible"
+    holding = (data.get("bound") or {}).get("holding_m") or 0.0
+    over = f" with stops that hold {holding:g} m" if holding > 0.0 else ""
+    return (
+        f"within {_percent(data['gap_pct'])} % of the shortest possible flight{over} "
+        f"(certified lower bound {data['lower_bound_m']:.1f} m)"
+    )
+
+
+def _percent(pct: float) -> str:
+    """A percentage to two significant figures or so, rounded up: never shown smaller."""
+    digits = 1 if pct >= 1.0 else 2 if pct >= 0.1 else 3
+    scale = 10.0**digits
+    return f"{math.ceil(pct * scale - 1e-9) / scale:.{digits}f}"
+
+
+def summary_text(data: dict[str, Any]) -> str:
+    """One screen of text from :func:`summary`'s dictionary."""
+    quality = flight_quality(data)
+    home = data["home"]
+    lines = [
+        f"targets        {data['targets']}  ({', '.join(data['target_names'][:6])}"
+        + (", ..." if data["targets"] > 6 else "")
+        + ")",
+        f"viewpoints     {data['viewpoints']} candidates, {data['tour_stops']} in the tour",
+        f"{'flown' if len(data['sorties']) > 1 else 'tour':<15s}"
+        f"{data['tour_length_m']:.1f} m, {quality}",
+        f"solver         {data['solver']} in {data['solve_s']:.2f} s"
+        + (
+            f", optimal over the {data['viewpoints']} candidate viewpoints"
+            if data["optimal_over_candidates"]
+            else ""
+        ),
+        _refine_line(data),
+        f"flight time    {_minutes(data['flight_time_s'])} (estimated at "
+        f"{data['cruise_speed_m_s']:g} m/s, {data['hold_s']:g} s hold per photo)",
+        f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, "
+        f"{data['altitude_above_home_m']:.1f} m"
+        f" above home; highest terrain {data['terrain_max_m']:.1f} m",
+        _camera_line(data),
+        f"home           {home['lat_deg']:.7f}, {home['lon_deg']:.7f} ({home['source']})",
+        _dem_line(data["dem"]),
+        f"clearance      at least {data['min_leg_clearance_m']} m over terrain on every leg",
+        f"firmware       {data['firmware']}",
+    ]
+    if len(data["sorties"]) > 1:
+        lines.append(
+            f"sorties        {len(data['sorties'])} (battery --endurance "
+            f"{data['endurance_min']:g} min): "
+            + ", ".join(
+                f"#{s['sortie']} {s['stops']} stops {s['length_m']:.0f} m "
+                f"{_minutes(s['flight_time_s'])}"
+                for s in data["sorties"]
+            )
+        )
+        found = data["sortie_order"]
+        if found is not None:
+            lines.append(
+                f"sortie order   {_minutes(found['flight_time_s'])} and "
+                f"{found['length_m']:.0f} m in all, against "
+                f"{_minutes(found['plain_cut_flight_time_s'])} and "
+                f"{found['plain_cut_length_m']:.0f} m in {found['plain_cut_sorties']} for the "
+                "solver's "
+                f"{data['solver_tour_length_m']:.0f} m tour cut as it is "
+                f"({found['moves']} moves in {found['search_s']:.1f} s)"
+            )
+    curve = data.get("altitude_curve")
+    if curve is not None:
+        lines.append(
+            f"altitude auto  {len(curve)} planes in {data['altitude_sweep_wall_s']:.1f} s; "
+            f"kept {data['altitude_best_amsl_m']:.1f} m (shortest flight time)"
+        )
+        for point in curve:
+            mark = " <" if point["altitude_amsl_m"] == data["altitude_best_amsl_m"] else ""
+            if point["flight_time_s"] is None:
+                lines.append(f"               {point['altitude_amsl_m']:7.1f} m  {point['error']}")
+                continue
+            lines.append(
+                f"               {point['altitude_amsl_m']:7.1f} m  tour "
+                f"{point['tour_length_m']:7.1f} m  flight {_minutes(point['flight_time_s'])}"
+                f"  ({point['wall_s']:.1f} s){mark}"
+            )
+    lines.append("stops          #  sortie  from prev   ETA      sees")
+    shown = data["stops"][:25]
+    for stop in shown:
+        lines.append(
+            f"               {stop['order']:<3d}{stop['sortie']:^7d}"
+            f"{stop['from_previous_m']:8.1f} m"
+            f"  {_minutes(stop['eta_s']):>9s}  {', '.join(stop['sees'])}"
+        )
+    if len(data["stops"]) > len(shown):
+        lines.append(f"               ... {len(data['stops']) - len(shown)} more in summary.json")
+    lines += [f"warning        {w}" for w in data["warnings"]]
+    if data["files"]:
+        lines.append("files          " + "\n               ".join(data["files"]))
+    return "\n".join(lines)

@@ -1,0 +1,2 @@
+"""From a tour to a flight: position margins, refinement, sorties, safety checks, mission items,
+geofence."""

@@ -1,0 +1,2 @@
+"""Replay: fly a plan on real ArduCopter or PX4 SITL, or on the simulated copter, and judge its
+photos."""

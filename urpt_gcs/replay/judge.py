@@ -1,0 +1,583 @@
+"""Judge a replayed flight against the terrain: was every target seen, was clearance kept?
+
+A target counts as photographed when some photo was taken from a position that sees it: the
+target is inside the camera's nadir cone (half-angle ``fov``) and the straight line from the
+camera to the target clears the DEM (:func:`urpt_gcs.visibility.regions.line_of_sight`); for a frame
+camera, inside the frame turned by the heading the photo's CAMERA_FEEDBACK reported (which
+must be within 5 degrees of the one its waypoint turns to) and within the GSD distance. Photo
+positions are those CAMERA_FEEDBACK reported, at the altitude above home it reported plus the
+planned home's ground elevation, so the DEM's vertical datum cancels out as in planning.
+
+What is checked comes with the mission (:func:`expected_checks`): a ``.plan`` urpt-gcs wrote
+names the camera half-angle, the least clearance and the targets of its sortie
+(:class:`~urpt_gcs.files.formats.qgc_plan.ReplayCheck`); a ``.waypoints`` has no room for them and
+takes them from the ``summary.json`` beside it, if that describes it; otherwise every target
+of the target file at ``--fov``. A ``--fov`` or ``--min-clearance`` given overrides the plan's,
+with a warning where they differ. Several sorties replayed together are judged each on its
+own targets and, by :func:`judge_set`, all their photos on every target of the file.
+
+Clearance is measured along the cruise legs: between consecutive GLOBAL_POSITION_INT fixes
+at the flight plane's altitude, the straight segment's least height above the DEM's bilinear
+surface, exactly (:func:`urpt_gcs.visibility.segments.segment_profile`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+import pyproj
+
+from urpt_gcs.files.formats.qgc_plan import read_replay_check
+from urpt_gcs.flight.mission import Mission, photo_headings, waypoint_positions
+from urpt_gcs.site.camera import Frame, grid_bearing_deg
+from urpt_gcs.site.targets import Target, read_targets
+from urpt_gcs.site.terrain import WGS84, FloatArray, Terrain, open_dem, planning_crs, read_terrain
+from urpt_gcs.visibility.regions import BoolArray, in_frame, line_of_sight
+from urpt_gcs.visibility.segments import segment_profile
+
+if TYPE_CHECKING:
+    from urpt_gcs.replay.fly import Flight
+
+# Photo positions are on MAVLink's 1e-7 degree grid (about 1 cm): allow that on the cone.
+CONE_TOLERANCE_M = 0.02
+# A frame camera's photo must be taken within this of the heading its waypoint turns to.
+HEADING_TOLERANCE_DEG = 5.0
+# Fixes within this of the planned altitude are on a cruise leg.
+CRUISE_BAND_M = 0.5
+# Terrain read around the points, so bilinear samples at the edge exist.
+TERRAIN_MARGIN_M = 10.0
+# What a replay checks when neither the mission nor a flag says.
+DEFAULT_FOV_DEG = 30.0
+DEFAULT_MIN_CLEARANCE_M = 10.0
+# A summary's stop describes a waypoint if they agree to this (both on MAVLink's 1e-7 grid).
+SAME_PLACE_DEG = 1e-9
+SUMMARY_FILE = "summary.json"
+
+
+@dataclass(frozen=True, slots=True)
+class Expected:
+    """What a replay judges, and where that came from.
+
+    Attributes
+    ----------
+    fov_deg
+        Camera half-angle from nadir.
+    min_clearance_m
+        Least height above the terrain the cruise legs must keep.
+    targets
+        The targets to be photographed with their positions, or None: by ``names``.
+    names
+        The names of the targets, to be found in the target file; None with ``targets``
+        None: every target of the file.
+    source
+        Where these came from, for the report (``mission_2.plan, sortie 2 of 3``).
+    warnings
+        Flags that override the mission's, or a summary that does not fit.
+    frame, gsd_cm
+        The plan's frame camera (None: the cone) and the ground resolution it had to reach.
+    """
+
+    fov_deg: float
+    min_clearance_m: float
+    targets: tuple[Target, ...] | None = None
+    names: tuple[str, ...] | None = None
+    source: str = "--fov and --min-clearance, every target of --targets"
+    warnings: tuple[str, ...] = ()
+    frame: Frame | None = None
+    gsd_cm: float | None = None
+
+
+def expected_checks(
+    plan_path: Path, mission: Mission, fov_deg: float | None, min_clearance_m: float | None
+) -> Expected:
+    """What a replay of ``plan_path`` checks; see the module docstring.
+
+    Parameters
+    ----------
+    plan_path
+        The mission file, as read into ``mission``.
+    mission
+        Its mission, to tell whether a ``summary.json`` beside it describes it.
+    fov_deg, min_clearance_m
+        ``--fov`` and ``--min-clearance`` if given, else None.
+
+    Raises
+    ------
+    MissionFileError
+        If a plan's ``urptGcs`` key is not usable.
+    """
+    warnings: list[str] = []
+    if plan_path.suffix.lower() == ".plan":
+        check = read_replay_check(plan_path.read_text(encoding="utf-8"), str(plan_path))
+        if check is None:
+            planned = None
+        else:
+            planned = (check.fov_deg, check.min_clearance_m)
+            where = f"{plan_path.name}, sortie {check.sortie} of {check.sorties}"
+            targets: tuple[Target, ...] | None = check.targets
+            names: tuple[str, ...] | None = None
+            camera = (check.frame, check.gsd_cm)
+    else:
+        planned, where, names, targets = _from_summary(plan_path, mission, warnings)
+        camera = _camera_from_summary(plan_path) if planned is not None else (None, None)
+    if planned is None:
+        return Expected(
+            fov_deg if fov_deg is not None else DEFAULT_FOV_DEG,
+            min_clearance_m if min_clearance_m is not None else DEFAULT_MIN_CLEARANCE_M,
+            warnings=tuple(warnings),
+        )
+    fov, clearance = planned
+    for flag, given, value, unit in (
+        ("--fov", fov_deg, fov, " deg"),
+        ("--min-clearance", min_clearance_m, clearance, " m"),
+    ):
+        if given is not None and given != value:
+            warnings.append(
+                f"{flag} {given:g}{unit} overrides the {value:g}{unit} {plan_path.name} was "
+                "planned for"
+            )
+    return Expected(
+        fov_deg if fov_deg is not None else fov,
+        min_clearance_m if min_clearance_m is not None else clearance,
+        targets,
+        names,
+        where,
+        tuple(warnings),
+        *camera,
+    )
+
+
+def _camera_from_summary(path: Path) -> tuple[Frame | None, float | None]:
+    """The frame camera a ``summary.json`` names (None, None for the cone)."""
+    try:
+        data: Any = json.loads((path.parent / SUMMARY_FILE).read_text(encoding="utf-8"))
+        camera = data.get("camera")
+        if camera is None:
+            return None, None
+        w, h = (float(v) for v in camera["sensor_mm"])
+        iw, ih = (int(v) for v in camera["image_px"])
+        frame = Frame(w, h, float(camera["focal_mm"]), iw, ih)
+        gsd = camera.get("gsd_cm_required")
+        return frame, None if gsd is None else float(gsd)
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+        return None, None
+
+
+def _from_summary(
+    path: Path, mission: Mission, warnings: list[str]
+) -> tuple[tuple[float, float] | None, str, tuple[str, ...] | None, None]:
+    """The camera, clearance and target names for a .waypoints from the summary beside it."""
+    summary_path = path.parent / SUMMARY_FILE
+    stem = path.stem
+    number = 1 if stem == "mission" else None
+    if stem.startswith("mission_") and stem[len("mission_") :].isdigit():
+        number = int(stem[len("mission_") :])
+    if not summary_path.is_file() or number is None:
+        return None, "", None, None
+    fallback = "checking every target of --targets at --fov instead: plan again to fix it"
+    try:
+        data: Any = json.loads(summary_path.read_text(encoding="utf-8"))
+        stops = [s for s in data["stops"] if s["sortie"] == number]
+        placed = [(float(s["lat_deg"]), float(s["lon_deg"])) for s in stops]
+        names = tuple(dict.fromkeys(str(n) for s in stops for n in s["sees"]))
+        planned = (float(data["fov_deg"]), float(data.get("min_clearance_m", math.nan)))
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        warnings.append(f"'{summary_path}' is not a summary urpt-gcs wrote ({exc}); {fallback}")
+        return None, "", None, None
+    flown = waypoint_positions(mission)
+    if len(placed) != len(flown) or any(
+        abs(a - c) > SAME_PLACE_DEG or abs(b - d) > SAME_PLACE_DEG
+        for (a, b), (c, d) in zip(placed, flown, strict=True)
+    ):
+        warnings.append(
+            f"'{summary_path}' does not describe {path.name} (its sortie {number} has other "
+            f"stops); {fallback}"
+        )
+        return None, "", None, None
+    if not math.isfinite(planned[1]):
+        planned = (planned[0], DEFAULT_MIN_CLEARANCE_M)
+    sorties = len(data.get("sorties", [])) or 1
+    return planned, f"{SUMMARY_FILE} for {path.name}, sortie {number} of {sorties}", names, None
+
+
+@dataclass(frozen=True, slots=True)
+class TargetSeen:
+    """Which photo saw a target (``photo`` None if none did), and why not if not; ``plan``
+    names the flight the photo is from when several are judged together."""
+
+    name: str
+    photo: int | None
+    offset_m: float | None
+    reason: str = ""
+    plan: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ReplayReport:
+    """The verdict on one replayed flight."""
+
+    plan: str
+    flight: Flight
+    targets: tuple[TargetSeen, ...]
+    min_clearance_m: float | None
+    required_clearance_m: float
+    problems: tuple[str, ...]
+    expected: Expected = Expected(DEFAULT_FOV_DEG, DEFAULT_MIN_CLEARANCE_M)
+    home_amsl_m: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        """True when every target was seen and the clearance was kept."""
+        return not self.problems
+
+
+def _xy(transformer: pyproj.Transformer, lat: list[float], lon: list[float]) -> FloatArray:
+    x, y = transformer.transform(lon, lat)
+    return np.column_stack([np.atleast_1d(x), np.atleast_1d(y)]).astype(np.float64)
+
+
+def _site(
+    dem_path: Path, lat_lon: Sequence[tuple[float, float]]
+) -> tuple[Any, pyproj.CRS, pyproj.Transformer]:
+    """The DEM, and the CRS planning would use for these points."""
+    info = open_dem(dem_path)
+    lats, lons = [p[0] for p in lat_lon], [p[1] for p in lat_lon]
+    crs = planning_crs(info, (min(lons), min(lats), max(lons), max(lats)))
+    return info, crs, pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
+
+
+def _chosen(expected: Expected, targets_path: Path, problems: list[str]) -> list[Target]:
+    """The targets ``expected`` names: its own, the file's by name, or the file's all."""
+    if expected.targets is not None:
+        return list(expected.targets)
+    every = read_targets(targets_path).targets
+    if expected.names is None:
+        return list(every)
+    by_name = {t.name: t for t in every}
+    missing = [n for n in expected.names if n not in by_name]
+    problems.extend(
+        f"target {name} of {expected.source} is not in '{targets_path}': give the target "
+        "file the plan was made from"
+        for name in missing
+    )
+    return [by_name[n] for n in expected.names if n in by_name]
+
+
+def judge(
+    flight: Flight,
+    mission: Mission,
+    dem_path: Path,
+    targets_path: Path,
+    expected: Expected,
+    plan_name: str,
+) -> ReplayReport:
+    """Check a flight's photos and track against the DEM; see the module docstring."""
+    problems: list[str] = []
+    targets = _chosen(expected, targets_path, problems)
+    home = (mission.home.lat_deg, mission.home.lon_deg)
+    info, crs, to_xy = _site(dem_path, [*((t.lat_deg, t.lon_deg) for t in targets), home])
+    target_xy = _xy(to_xy, [t.lat_deg for t in targets], [t.lon_deg for t in targets])
+    photo_xy = _xy(to_xy, [p.lat_deg for p in flight.photos], [p.lon_deg for p in flight.photos])
+    track_xy = _xy(to_xy, [p.lat_deg for p in flight.track], [p.lon_deg for p in flight.track])
+    ground0 = mission.home.amsl_m
+    eye_z = ground0 + np.array([p.alt_rel_m for p in flight.photos], dtype=np.float64)
+    track_z = ground0 + np.array([p.alt_rel_m for p in flight.track], dtype=np.float64)
+    tan = math.tan(math.radians(expected.fov_deg))
+
+    # Every line of sight and leg runs between these points, so their box is all it needs.
+    points = np.vstack([target_xy.reshape(-1, 2), photo_xy.reshape(-1, 2), track_xy.reshape(-1, 2)])
+    lo, hi = points.min(axis=0) - TERRAIN_MARGIN_M, points.max(axis=0) + TERRAIN_MARGIN_M
+    terrain = read_terrain(info, crs, (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
+    ground_t = terrain.sample(target_xy[:, 0], target_xy[:, 1])
+
+    if not flight.photos:
+        problems.append("no photo was taken: check the mission's DO_DIGICAM_CONTROL items")
+    view = None
+    if expected.frame is not None:
+        headings = _photo_headings(flight, mission, crs, photo_xy, problems)
+        view = _FrameView(expected.frame, expected.gsd_cm, headings)
+    seen = _targets_seen(
+        terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan, view
+    )
+    for row in seen:
+        if row.photo is None:
+            problems.append(f"target {row.name} was photographed from no position that sees it")
+    clearance = _min_clearance(terrain, track_xy, track_z, flight, mission)
+    if clearance is None:
+        problems.append("no position at the flight altitude was received: the flight is unchecked")
+    elif clearance < expected.min_clearance_m:
+        problems.append(
+            f"the track passed {clearance:.1f} m above the terrain, under the required "
+            f"{expected.min_clearance_m:g} m"
+        )
+    return ReplayReport(
+        plan_name,
+        flight,
+        seen,
+        clearance,
+        expected.min_clearance_m,
+        tuple(problems),
+        expected,
+        ground0,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _FrameView:
+    """A frame camera's photos: each holds what lies inside its frame turned by its heading
+    (grid degrees), within the GSD distance."""
+
+    frame: Frame
+    gsd_cm: float | None
+    heading_deg: FloatArray
+
+    def holds(
+        self, photo: npt.NDArray[np.intp], dx: FloatArray, dy: FloatArray, height: FloatArray
+    ) -> BoolArray:
+        ok = in_frame(self.frame, dx, dy, height, self.heading_deg[photo], CONE_TOLERANCE_M)
+        if self.gsd_cm is not None:
+            slant = np.hypot(np.hypot(dx, dy), height)
+            ok &= slant <= self.frame.distance_for_gsd_m(self.gsd_cm) + CONE_TOLERANCE_M
+        return ok
+
+
+def _photo_headings(
+    flight: Flight, mission: Mission, crs: pyproj.CRS, photo_xy: FloatArray, problems: list[str]
+) -> FloatArray:
+    """Each photo's heading in the grid judged on: the one its CAMERA_FEEDBACK reported,
+    which must be within HEADING_TOLERANCE_DEG of the mission's for that photo; the
+    mission's where none was reported."""
+    planned = photo_headings(mission) or []
+    reported = np.array([p.heading_deg for p in flight.photos], dtype=np.float64)
+    used: FloatArray = reported.copy()
+    for k, heading in enumerate(reported.tolist()):
+        want = planned[k] if k < len(planned) else math.nan
+        if not math.isfinite(heading):
+            used[k] = want
+            continue
+        if math.isfinite(want):
+            off = abs((heading - want + 180.0) % 360.0 - 180.0)
+            if off > HEADING_TOLERANCE_DEG:
+                problems.append(
+                    f"photo {k + 1} was taken at heading {heading:.1f} deg, {off:.1f} deg off "
+                    f"the {want:.1f} deg its waypoint turns to (more than "
+                    f"{HEADING_TOLERANCE_DEG:g} deg)"
+                )
+    unknown = ~np.isfinite(used)
+    if unknown.any():
+        problems.append(
+            f"{int(unknown.sum())} photos have no heading, reported or planned: a frame camera's "
+            "photos cannot be judged without one"
+        )
+    if photo_xy.size == 0:
+        return used
+    return grid_bearing_deg(crs, photo_xy, np.where(unknown, 0.0, used))
+
+
+@dataclass(frozen=True, slots=True)
+class SetReport:
+    """Several sorties replayed: each judged on its own, and all their photos together on
+    every target of the target file."""
+
+    reports: tuple[ReplayReport, ...]
+    targets: tuple[TargetSeen, ...]
+    problems: tuple[str, ...]
+
+    @property
+    def ok(self) -> bool:
+        """True when every flight passed and together they saw every target."""
+        return not self.problems and all(r.ok for r in self.reports)
+
+
+def judge_set(reports: Sequence[ReplayReport], dem_path: Path, targets_path: Path) -> SetReport:
+    """Judge the photos of all ``reports`` together on every target of ``targets_path``,
+    each photo at its own flight's camera."""
+    targets = list(read_targets(targets_path).targets)
+    photos = [(r, p) for r in reports for p in r.flight.photos]
+    info, crs, to_xy = _site(
+        dem_path,
+        [*((t.lat_deg, t.lon_deg) for t in targets), *((p.lat_deg, p.lon_deg) for _, p in photos)],
+    )
+    target_xy = _xy(to_xy, [t.lat_deg for t in targets], [t.lon_deg for t in targets])
+    photo_xy = _xy(to_xy, [p.lat_deg for _, p in photos], [p.lon_deg for _, p in photos])
+    eye_z = np.array([r.home_amsl_m + p.alt_rel_m for r, p in photos], dtype=np.float64)
+    tan = np.array([math.tan(math.radians(r.expected.fov_deg)) for r, _ in photos])
+    points = np.vstack([target_xy, photo_xy.reshape(-1, 2)])
+    lo, hi = points.min(axis=0) - TERRAIN_MARGIN_M, points.max(axis=0) + TERRAIN_MARGIN_M
+    terrain = read_terrain(info, crs, (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
+    ground_t = terrain.sample(target_xy[:, 0], target_xy[:, 1])
+    view = None
+    framed = [r.expected for r in reports if r.expected.frame is not None]
+    if framed:
+        # Each photo at the heading it reported (one without is held by none).
+        reported = np.array([p.heading_deg for _, p in photos], dtype=np.float64)
+        grid = grid_bearing_deg(crs, photo_xy, np.nan_to_num(reported)) if photos else reported
+        assert framed[0].frame is not None
+        view = _FrameView(
+            framed[0].frame, framed[0].gsd_cm, np.where(np.isfinite(reported), grid, np.nan)
+        )
+    rows = _targets_seen(
+        terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan, view
+    )
+    named = []
+    for row in rows:
+        if row.photo is None:
+            named.append(row)
+            continue
+        report, photo = photos[row.photo - 1]
+        named.append(TargetSeen(row.name, photo.index, row.offset_m, plan=report.plan))
+    problems = tuple(
+        f"target {row.name} was photographed by none of the {len(reports)} flights"
+        for row in named
+        if row.photo is None
+    )
+    return SetReport(tuple(reports), tuple(named), problems)
+
+
+def _targets_seen(
+    terrain: Terrain,
+    names: list[str],
+    target_xy: FloatArray,
+    ground_t: FloatArray,
+    photo_xy: FloatArray,
+    eye_z: FloatArray,
+    tan: float | FloatArray,
+    view: _FrameView | None = None,
+) -> tuple[TargetSeen, ...]:
+    rows = []
+    for i, name in enumerate(names):
+        if not math.isfinite(float(ground_t[i])):
+            rows.append(TargetSeen(name, None, None, "no elevation under the target"))
+            continue
+        if photo_xy.size == 0:
+            rows.append(TargetSeen(name, None, None, "no photos"))
+            continue
+        offset = np.hypot(photo_xy[:, 0] - target_xy[i, 0], photo_xy[:, 1] - target_xy[i, 1])
+        cone = (eye_z - ground_t[i]) * tan
+        held = offset <= cone + CONE_TOLERANCE_M
+        if view is not None:
+            every = np.arange(len(photo_xy))
+            dx, dy = target_xy[i, 0] - photo_xy[:, 0], target_xy[i, 1] - photo_xy[:, 1]
+            held = view.holds(every, dx, dy, eye_z - ground_t[i])
+        inside = np.flatnonzero(held)
+        clear = np.zeros(0, dtype=bool)
+        if inside.size:
+            eyes = np.column_stack([photo_xy[inside], eye_z[inside]])
+            tgt = np.tile([target_xy[i, 0], target_xy[i, 1], ground_t[i]], (inside.size, 1))
+            clear = line_of_sight(terrain, eyes, tgt)
+        if clear.any():
+            k = int(inside[np.flatnonzero(clear)[0]])
+            rows.append(TargetSeen(name, k + 1, float(offset[k])))
+            continue
+        nearest = int(np.argmin(offset - cone))
+        reason = (
+            f"photo {nearest + 1} sees it only past terrain"
+            if inside.size
+            else f"nearest photo {nearest + 1} is {offset[nearest] - cone[nearest]:.1f} m "
+            "outside its camera cone"
+        )
+        if view is not None and not inside.size:
+            reason = f"no photo holds it in its frame (nearest: photo {nearest + 1})"
+        rows.append(TargetSeen(name, None, None, reason))
+    return tuple(rows)
+
+
+def _min_clearance(
+    terrain: Terrain,
+    track_xy: FloatArray,
+    track_z: FloatArray,
+    flight: Flight,
+    mission: Mission,
+) -> float | None:
+    cruise = np.array(
+        [p.alt_rel_m >= mission.altitude_rel_m - CRUISE_BAND_M for p in flight.track], dtype=bool
+    )
+    legs = np.flatnonzero(cruise[:-1] & cruise[1:])
+    if legs.size == 0:
+        return None
+    a = np.column_stack([track_xy[legs], track_z[legs]])
+    b = np.column_stack([track_xy[legs + 1], track_z[legs + 1]])
+    excess = segment_profile(terrain, a, b).excess_m
+    known = np.isfinite(excess)
+    return float(-excess[known].max()) if known.any() else None
+
+
+def report_text(report: ReplayReport) -> str:
+    """The replay's report for the operator, one screen."""
+    flight = report.flight
+    upload = flight.upload
+    ratio = flight.sim_time_s / flight.wall_time_s if flight.wall_time_s > 0 else math.nan
+    lines = [
+        f"replay of {report.plan} on {flight.vehicle.describe()}",
+        f"  upload    {upload.items} items verified in {upload.elapsed_s:.2f} s "
+        f"({upload.attempts} attempt{'s' if upload.attempts != 1 else ''})",
+        f"  flight    {flight.sim_time_s:.1f} s simulated in {flight.wall_time_s:.1f} s wall "
+        f"({ratio:.0f}x)",
+        f"  checks    {_checks_line(report)}",
+        *(f"  warning   {w}" for w in report.expected.warnings),
+        f"  photos    {len(flight.photos)}",
+        f"  targets   {sum(r.photo is not None for r in report.targets)} of "
+        f"{len(report.targets)} seen",
+    ]
+    width = max((len(r.name) for r in report.targets), default=0)
+    for row in report.targets:
+        if row.photo is not None:
+            lines.append(
+                f"    {row.name:<{width}}  photo {row.photo} ({row.offset_m:.1f} m off nadir)"
+            )
+        else:
+            lines.append(f"    {row.name:<{width}}  NOT SEEN: {row.reason}")
+    if report.min_clearance_m is not None:
+        lines.append(
+            f"  clearance {report.min_clearance_m:.1f} m least above the terrain on cruise legs "
+            f"(required {report.required_clearance_m:g} m)"
+        )
+    lines.append(f"  result    {'PASS' if report.ok else 'FAIL'}")
+    lines.extend(f"  problem   {problem}" for problem in report.problems)
+    return "\n".join(lines)
+
+
+def _checks_line(report: ReplayReport) -> str:
+    expected = report.expected
+    camera = f"camera ±{expected.fov_deg:g}°"
+    if expected.frame is not None:
+        f = expected.frame
+        camera = (
+            f"frame {f.sensor_w_mm:g}x{f.sensor_h_mm:g} mm / {f.focal_mm:g} mm at each "
+            "photo's heading"
+        )
+        if expected.gsd_cm is not None:
+            camera += f", GSD {expected.gsd_cm:g} cm"
+    return (
+        f"{len(report.targets)} targets at {camera}, clearance "
+        f"{expected.min_clearance_m:g} m (from {expected.source})"
+    )
+
+
+def set_report_text(report: SetReport) -> str:
+    """Several replays' reports, then the verdict on all their photos together."""
+    parts = [report_text(r) for r in report.reports]
+    seen = sum(r.photo is not None for r in report.targets)
+    lines = [
+        f"together: {len(report.reports)} flights, "
+        f"{sum(len(r.flight.photos) for r in report.reports)} photos",
+        f"  targets   {seen} of {len(report.targets)} seen",
+    ]
+    width = max((len(r.name) for r in report.targets), default=0)
+    for row in report.targets:
+        if row.photo is not None:
+            lines.append(f"    {row.name:<{width}}  {row.plan} photo {row.photo}")
+        else:
+            lines.append(f"    {row.name:<{width}}  NOT SEEN by any flight")
+    failed = [r.plan for r in report.reports if not r.ok]
+    lines.append(f"  result    {'PASS' if report.ok else 'FAIL'}")
+    lines.extend(f"  problem   {p}" for p in report.problems)
+    lines.extend(f"  problem   {plan} failed on its own" for plan in failed)
+    return "\n\n".join([*parts, "\n".join(lines)])

@@ -1,0 +1,1 @@
+"""Site inputs: input files, targets, the terrain (DEM) and the camera."""

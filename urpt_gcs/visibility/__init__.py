@@ -1,0 +1,1 @@
+"""What the camera sees: the exact segment test, visibility regions, outer stars and cover sets."""
