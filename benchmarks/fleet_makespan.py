@@ -26,8 +26,12 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from test_plan import _valid_targets  # noqa: E402
 
-from urpt_gcs.pipeline.fleet import FleetSettings, VehicleSpec, fleet_problem  # noqa: E402
-from urpt_gcs.pipeline.planner import PlanSettings  # noqa: E402
+from urpt_gcs.pipeline.fleet import fleet_problem  # noqa: E402
+from urpt_gcs.pipeline.settings import (  # noqa: E402
+    FleetSettings,
+    PlanSettings,
+    VehicleSpec,
+)
 from urpt_gcs.solvers import choose, prepare, solve  # noqa: E402
 from urpt_gcs.solvers.base import SolveSettings  # noqa: E402
 from urpt_gcs.solvers.fleet import SINGLE_SHARE, makespan_bound, plan_fleet  # noqa: E402

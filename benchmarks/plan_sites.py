@@ -22,7 +22,8 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from test_plan import REAL_CASES, _valid_targets  # noqa: E402
 
-from urpt_gcs.pipeline.planner import PlanSettings, plan  # noqa: E402
+from urpt_gcs.pipeline.planner import plan  # noqa: E402
+from urpt_gcs.pipeline.settings import PlanSettings  # noqa: E402
 from urpt_gcs.solvers import SolveSettings  # noqa: E402
 
 

@@ -27,7 +27,8 @@ from urpt_gcs.flight.mission import (
     photo_headings,
     upload_problem,
 )
-from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.sim.store import Item, ardupilot_stored
 from urpt_gcs.site.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.solvers import SolveSettings

@@ -26,7 +26,8 @@ from urpt_gcs.bound.certificate import outer_regions
 from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.files.products import write_products
 from urpt_gcs.files.report import flight_quality, summary_text
-from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.solvers import SolveSettings
 
 ORIGIN = (500_000.0, 5_200_000.0)

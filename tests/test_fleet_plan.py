@@ -365,7 +365,8 @@ def test_track_follows_the_plan_through_every_stop_in_the_planned_time() -> None
     the sortie splitter), it passes over every stop at the plane and starts and ends on the
     ground at home."""
     from urpt_gcs.pipeline.fleet import track
-    from urpt_gcs.pipeline.planner import PlanSettings, plan
+    from urpt_gcs.pipeline.planner import plan
+    from urpt_gcs.pipeline.settings import PlanSettings
 
     settings = PlanSettings(solve=SolveSettings(time_limit_s=0.5), endurance_min=4.0)
     result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)

@@ -20,7 +20,8 @@ from independent import (
 from pymavlink import mavutil
 
 from urpt_gcs.files.products import write_products
-from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import SolveSettings
 

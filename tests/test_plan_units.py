@@ -24,7 +24,8 @@ from independent import check_mission, load_raster, read_waypoints_file, sees
 from urpt_gcs.cli import main
 from urpt_gcs.files.products import write_products
 from urpt_gcs.files.report import summary_text
-from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import SolveSettings
 

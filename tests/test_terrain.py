@@ -15,7 +15,8 @@ from rasterio.transform import from_origin
 from rasterio.windows import Window
 
 from urpt_gcs.errors import DemError
-from urpt_gcs.pipeline.planner import PlanSettings, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.site.terrain import (
     check_elevations,
     open_dem,

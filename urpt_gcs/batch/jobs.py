@@ -54,7 +54,7 @@ else:  # pragma: no cover - Python 3.10
 if TYPE_CHECKING:
     from distributed import Client
 
-    from urpt_gcs.pipeline.planner import PlanSettings
+    from urpt_gcs.pipeline.settings import PlanSettings
 
 RESULTS_FILE = "batch.csv"
 # The cone camera's half-angle when a job names no camera at all, as `plan` takes it.
@@ -409,7 +409,7 @@ def plan_settings(options: Mapping[str, Any]) -> PlanSettings:
         A value out of range (the message names the flag).
     """
     from urpt_gcs.flight.mission import MissionSettings
-    from urpt_gcs.pipeline.planner import PlanSettings
+    from urpt_gcs.pipeline.settings import PlanSettings
     from urpt_gcs.solvers import SolveSettings
 
     o = {**PLAN_DEFAULTS, **options}

@@ -242,7 +242,8 @@ def _peak_rss_mb() -> float:
 
 
 def _plan_child(dem: str, targets: str, options: dict[str, Any], out: Any) -> None:
-    from urpt_gcs.pipeline.planner import PlanSettings, plan
+    from urpt_gcs.pipeline.planner import plan
+    from urpt_gcs.pipeline.settings import PlanSettings
 
     start = time.perf_counter()
     try:
@@ -332,7 +333,7 @@ def run_scale(
     seed
         Seed of the sites.
     plan_options
-        Keyword arguments of :class:`urpt_gcs.pipeline.planner.PlanSettings`.
+        Keyword arguments of :class:`urpt_gcs.pipeline.settings.PlanSettings`.
     progress
         Called with a line as each run starts and ends.
 

@@ -12,7 +12,7 @@ import click
 from urpt_gcs.cli._root import fail, main, parse_home, upload_and_report
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.flight.mission import FIRMWARES, MissionSettings
-from urpt_gcs.pipeline.planner import PlanSettings
+from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.site.camera import CAMERAS, frame_from_flags
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
@@ -20,7 +20,7 @@ from urpt_gcs.vehicle.link import DEFAULT_URL
 from urpt_gcs.visibility.regions import DEFAULT_HEADINGS
 
 if TYPE_CHECKING:
-    from urpt_gcs.pipeline.fleet import FleetSettings
+    from urpt_gcs.pipeline.settings import FleetSettings
 
 
 @main.command("plan")
@@ -398,7 +398,7 @@ def _fleet(
     min_separation: float,
 ) -> FleetSettings | None:
     """The fleet the flags ask for; None for one vehicle without --fleet (the plain plan)."""
-    from urpt_gcs.pipeline.fleet import FleetSettings, VehicleSpec, read_fleet
+    from urpt_gcs.pipeline.settings import FleetSettings, VehicleSpec, read_fleet
 
     if vehicles < 1:
         raise SettingsError(f"--vehicles {vehicles} is below 1: give how many vehicles fly")

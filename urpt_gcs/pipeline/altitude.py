@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.pipeline.planner import Plan, PlanSettings, plan
+from urpt_gcs.pipeline.planner import Plan, plan
+from urpt_gcs.pipeline.settings import PlanSettings
 
 # Altitudes planned by default, the lowest and highest included.
 DEFAULT_STEPS = 6

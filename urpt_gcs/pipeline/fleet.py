@@ -20,11 +20,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -32,7 +30,6 @@ import numpy.typing as npt
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.pipeline.planner import (
     Plan,
-    PlanSettings,
     Progress,
     _altitude_rel,
     _Area,
@@ -45,6 +42,7 @@ from urpt_gcs.pipeline.planner import (
     finish_plan,
     flight_model,
 )
+from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, SeparationMode, VehicleSpec
 from urpt_gcs.site.targets import TargetSet
 from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers import choose, prepare, solve
@@ -62,13 +60,6 @@ from urpt_gcs.solvers.fleet import (
 from urpt_gcs.visibility.cover import Instance, build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
-SeparationMode = Literal["altitude", "time"]
-SEPARATION_MODES = ("altitude", "time")
 # Start delays are searched in whole steps of this, up to the undelayed makespan.
 DELAY_STEP_S = 5.0
 # A vehicle keeps its planned timing only so well (a real copter flew the demo 3 % faster
@@ -83,140 +74,6 @@ MAX_DELAY_SHARE = 0.5
 # Each vehicle's written altitude is rounded to whole centimetres (home down, height up): the
 # layers as written may come this much closer than the spacing asked for.
 _WRITTEN_ROUNDING_M = 0.05
-_FLEET_KEYS = {
-    "home_lat": "degrees",
-    "home_lon": "degrees",
-    "speed_m_s": "m/s",
-    "endurance_min": "minutes",
-    "altitude_m": "metres",
-}
-
-
-@dataclass(frozen=True, slots=True)
-class VehicleSpec:
-    """What differs for one vehicle; None: the plan's own value."""
-
-    home: tuple[float, float] | None = None
-    speed_m_s: float | None = None
-    endurance_min: float | None = None
-    altitude_m: float | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class FleetSettings:
-    """The fleet and how its vehicles are kept apart."""
-
-    vehicles: tuple[VehicleSpec, ...]
-    separation: SeparationMode = "altitude"
-    layer_spacing_m: float = 10.0
-    min_separation_m: float = 10.0
-    source: str = "--vehicles"
-
-    def __post_init__(self) -> None:
-        if not self.vehicles:
-            raise SettingsError(f"{self.source} has no vehicle: give at least one")
-        if len(self.vehicles) > 16:
-            raise SettingsError(
-                f"{self.source}: {len(self.vehicles)} vehicles, over the 16 a fleet may have: "
-                "plan fewer at a time"
-            )
-        if self.separation not in SEPARATION_MODES:
-            raise SettingsError(
-                f"--separation {self.separation!r} is not known: use altitude or time"
-            )
-        if not (math.isfinite(self.layer_spacing_m) and self.layer_spacing_m > 0.0):
-            raise SettingsError(
-                f"--layer-spacing {self.layer_spacing_m} must be a positive number of metres"
-            )
-        if not (math.isfinite(self.min_separation_m) and self.min_separation_m > 0.0):
-            raise SettingsError(
-                f"--min-separation {self.min_separation_m} must be a positive number of metres"
-            )
-
-    @property
-    def min_m(self) -> float:
-        """The separation required: vertical spacing, or horizontal distance in time mode."""
-        return self.layer_spacing_m if self.separation == "altitude" else self.min_separation_m
-
-
-def read_fleet(path: Path) -> tuple[VehicleSpec, ...]:
-    """The vehicles of a fleet file: one ``[[vehicle]]`` table each, with any of
-    ``home_lat``/``home_lon`` (together), ``speed_m_s``, ``endurance_min``, ``altitude_m``.
-
-    Raises
-    ------
-    SettingsError
-        One line naming the file, the vehicle, the key and the fix.
-    """
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise SettingsError(f"--fleet '{path}' does not exist: check the path") from None
-    except IsADirectoryError:
-        raise SettingsError(f"--fleet '{path}' is a folder: give a .toml file") from None
-    except UnicodeDecodeError:
-        raise SettingsError(f"--fleet '{path}' is not UTF-8 text: save it as UTF-8") from None
-    except OSError as exc:
-        raise SettingsError(f"--fleet '{path}' cannot be read: {exc.strerror or exc}") from None
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SettingsError(f"--fleet {path}: not valid TOML ({exc}): fix the syntax") from None
-    extra = sorted(set(document) - {"vehicle"})
-    if extra:
-        raise SettingsError(
-            f"--fleet {path}: unknown table or key '{extra[0]}': the file holds only "
-            "[[vehicle]] tables"
-        )
-    tables = document.get("vehicle")
-    if not isinstance(tables, list) or not tables:
-        raise SettingsError(
-            f"--fleet {path}: no [[vehicle]] table: add one per vehicle (an empty one takes "
-            "the plan's defaults)"
-        )
-    return tuple(_vehicle(path, number, raw) for number, raw in enumerate(tables, start=1))
-
-
-def _vehicle(path: Path, number: int, raw: object) -> VehicleSpec:
-    where = f"--fleet {path}: [[vehicle]] {number}"
-    if not isinstance(raw, dict):
-        raise SettingsError(f"{where} is not a table: write it as [[vehicle]] with keys")
-    values: dict[str, float] = {}
-    for key, value in raw.items():
-        if key not in _FLEET_KEYS:
-            known = ", ".join(_FLEET_KEYS)
-            raise SettingsError(f"{where}: unknown key '{key}': use {known}")
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise SettingsError(
-                f"{where}: {key} = {value!r} is not a number: give it in {_FLEET_KEYS[key]}"
-            )
-        if not math.isfinite(value):
-            raise SettingsError(f"{where}: {key} = {value} is not a finite number")
-        values[key] = float(value)
-    if ("home_lat" in values) != ("home_lon" in values):
-        missing = "home_lon" if "home_lat" in values else "home_lat"
-        raise SettingsError(f"{where}: home_lat and home_lon go together: add {missing}")
-    home = None
-    if "home_lat" in values:
-        lat, lon = values["home_lat"], values["home_lon"]
-        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-            raise SettingsError(
-                f"{where}: home_lat = {lat:g}, home_lon = {lon:g} is not a position in degrees: "
-                "latitude -90..90, longitude -180..180"
-            )
-        home = (lat, lon)
-    for key, low, high in (("speed_m_s", 0.1, 50.0), ("endurance_min", 1e-6, 1e6)):
-        if key in values and not low <= values[key] <= high:
-            raise SettingsError(
-                f"{where}: {key} = {values[key]:g} is out of range: use {low:g} to {high:g} "
-                f"{_FLEET_KEYS[key]}"
-            )
-    return VehicleSpec(
-        home=home,
-        speed_m_s=values.get("speed_m_s"),
-        endurance_min=values.get("endurance_min"),
-        altitude_m=values.get("altitude_m"),
-    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -860,12 +717,9 @@ def _value(c: Closest, horizontal: bool) -> float:
 
 __all__ = [
     "FleetPlan",
-    "FleetSettings",
     "Separation",
-    "VehicleSpec",
     "closest",
     "fleet_problem",
     "plan_fleet_mission",
-    "read_fleet",
     "track",
 ]

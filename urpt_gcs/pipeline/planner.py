@@ -11,7 +11,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,7 +30,6 @@ from urpt_gcs.flight.margin import robust_tour
 from urpt_gcs.flight.mission import (
     GeoPoint,
     Mission,
-    MissionSettings,
     build_mission,
     waypoint_positions,
 )
@@ -46,7 +45,8 @@ from urpt_gcs.flight.safety import (
     split_sorties,
 )
 from urpt_gcs.flight.sorties import SEARCH_SHARE, SortieOrder, order_sorties
-from urpt_gcs.site.camera import Frame, true_bearing_deg
+from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.inputs import require_memory
 from urpt_gcs.site.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.site.terrain import (
@@ -63,11 +63,10 @@ from urpt_gcs.site.terrain import (
     read_mosaic,
     sample_points,
 )
-from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings, Tour, choose, prepare, solve
+from urpt_gcs.solvers import Tour, choose, prepare, solve
 from urpt_gcs.solvers.base import geometric_lower_bound
 from urpt_gcs.visibility.cover import Instance, build_instance, cover_sets, instance_bytes
 from urpt_gcs.visibility.regions import (
-    DEFAULT_HEADINGS,
     BoolArray,
     Camera,
     Region,
@@ -82,117 +81,6 @@ _WINDOW_MARGIN_CELLS = 4
 # The narrowest camera cone a plan accepts, as a radius on the flight plane: ten times the
 # 1e-7 degree grid waypoints are stored on, so a rounded waypoint stays well inside it.
 MIN_CONE_RADIUS_M = 0.1
-
-
-@dataclass(frozen=True, slots=True)
-class PlanSettings:
-    """Every choice a plan depends on. Defaults are what ``urpt-gcs plan`` uses."""
-
-    fov_deg: float = 30.0
-    samples: int = 36
-    altitude_m: float | None = None
-    clearance_m: float = 30.0
-    min_clearance_m: float = 10.0
-    home: tuple[float, float] | None = None
-    solver: str = "auto"
-    solve: SolveSettings = field(default_factory=SolveSettings)
-    mission: MissionSettings = field(default_factory=MissionSettings)
-    climb_m_s: float = 2.5
-    descent_m_s: float = 1.5
-    accel_m_s2: float = 2.5
-    max_agl_m: float = 120.0
-    strict: bool = False
-    endurance_min: float | None = 20.0
-    geofence_margin_m: float = 30.0
-    position_tolerance_m: float = 1.5
-    band: int | None = None
-    workers: int | None = None
-    frame: Frame | None = None
-    gsd_cm: float | None = None
-    headings: int = DEFAULT_HEADINGS
-    # Seconds for the certified lower bound (None: min(5 s, half the time limit)).
-    bound_time_s: float | None = None
-    refine: bool = True
-    # Whether to certify the flight (a plan tried only for its length may skip it).
-    certify: bool = True
-
-    def __post_init__(self) -> None:
-        # The camera's own checks (GSD without pixels, headings out of range) run here, so a
-        # bad flag is refused before any file is read.
-        self.camera_at(0.0)
-        if self.frame is not None and self.solver == "approx":
-            raise SettingsError(
-                "--solver approx places its own stops, which have no heading for a frame "
-                "camera: use --solver auto, exact, heuristic or ortools, or the cone (--fov)"
-            )
-        if self.workers is not None and self.workers < 1:
-            raise SettingsError(
-                f"--workers {self.workers} is below 1: give a number of threads, or omit it "
-                "to use every core"
-            )
-        if not (
-            math.isfinite(self.position_tolerance_m) and 0.0 <= self.position_tolerance_m <= 20.0
-        ):
-            raise SettingsError(
-                f"--position-tolerance {self.position_tolerance_m} m is out of range; use 0 to 20 m"
-            )
-        if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
-            raise SettingsError(
-                f"--fov {self.fov_deg} is outside (0, 90): give the camera half-angle in degrees"
-            )
-        if self.samples < 3:
-            raise SettingsError(f"--samples {self.samples} is below 3: use at least 3 azimuths")
-        if self.samples > 3600:
-            raise SettingsError(f"--samples {self.samples} is above 3600: use fewer azimuths")
-        if self.altitude_m is not None and not math.isfinite(self.altitude_m):
-            raise SettingsError(f"--altitude {self.altitude_m} is not a number of metres")
-        if not (math.isfinite(self.clearance_m) and self.clearance_m > 0.0):
-            raise SettingsError(
-                f"--clearance {self.clearance_m} must be a positive number of metres"
-            )
-        if not (math.isfinite(self.min_clearance_m) and self.min_clearance_m >= 0.0):
-            raise SettingsError(
-                f"--min-clearance {self.min_clearance_m} must be zero or more metres"
-            )
-        if not (math.isfinite(self.max_agl_m) and self.max_agl_m > 0.0):
-            raise SettingsError(f"--max-agl {self.max_agl_m} must be a positive number of metres")
-        if self.endurance_min is not None and not (
-            math.isfinite(self.endurance_min) and self.endurance_min > 0.0
-        ):
-            raise SettingsError(
-                f"--endurance {self.endurance_min} must be a positive number of minutes"
-            )
-        if self.solver not in SOLVER_CHOICES:
-            raise SettingsError(
-                f"--solver {self.solver!r} is not known: use one of {', '.join(SOLVER_CHOICES)}"
-            )
-        if self.home is not None:
-            lat, lon = self.home
-            if not (
-                math.isfinite(lat)
-                and -90 <= lat <= 90
-                and math.isfinite(lon)
-                and -180 <= lon <= 180
-            ):
-                hint = ""
-                if -90 <= lon <= 90 and -180 <= lat <= 180:
-                    hint = f": did you swap lat and lon? Give --home LAT,LON: --home {lon},{lat}"
-                raise SettingsError(f"--home {lat},{lon} is not a valid LAT,LON in degrees{hint}")
-        if self.bound_time_s is not None and not (
-            math.isfinite(self.bound_time_s) and 0.0 < self.bound_time_s <= 3600.0
-        ):
-            raise SettingsError(
-                f"--bound-time {self.bound_time_s} is out of range: give a number of seconds "
-                "above 0, up to 3600"
-            )
-        if self.band is not None and self.band < 1:
-            raise SettingsError(f"--band {self.band} is below 1: bands are numbered from 1")
-
-    def camera_at(self, altitude_m: float) -> Camera:
-        """The camera these settings describe, on a plane at ``altitude_m``."""
-        if self.frame is None:
-            return Camera(altitude_m, self.fov_deg, gsd_cm=self.gsd_cm)
-        return Camera.framed(altitude_m, self.frame, self.gsd_cm, self.headings)
 
 
 @dataclass(frozen=True, slots=True)
@@ -1054,4 +942,4 @@ def _latlon(crs: pyproj.CRS, xy: FloatArray) -> list[tuple[float, float]]:
     return list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist(), strict=True))
 
 
-__all__ = ["Leg", "Plan", "PlanSettings", "Target", "plan"]
+__all__ = ["Leg", "Plan", "Target", "plan"]
