@@ -8,7 +8,7 @@ import pyproj
 import pytest
 from affine import Affine
 
-from urpt_gcs.site.inputs import MEMORY_BUDGET_ENV, MemoryBudgetError
+from urpt_gcs.memory import MEMORY_BUDGET_ENV, MemoryBudgetError
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.cover import (
     Covers,

@@ -12,14 +12,13 @@ import rasterio
 from rasterio.transform import from_origin
 
 from urpt_gcs.errors import TargetsError
-from urpt_gcs.site.inputs import (
+from urpt_gcs.memory import (
     MEMORY_BUDGET_ENV,
     MemoryBudgetError,
     memory_budget_bytes,
-    read_capped,
     require_memory,
-    require_regular_file,
 )
+from urpt_gcs.site.inputs import read_capped, require_regular_file
 from urpt_gcs.site.terrain import open_dem, read_terrain
 
 

@@ -13,8 +13,13 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from types import TracebackType
 from typing import TextIO
+
+# The one progress channel every stage reports through: called with a line saying what starts
+# (a stage's name, a transfer's step); a :class:`StageProgress` is one.
+Progress = Callable[[str], None]
 
 _QUIET_S = 1.0
 _TICK_S = 0.2

@@ -524,14 +524,14 @@ def output_folders(jobs: Sequence[Job], out_dir: Path) -> None:
         check_out(Path(job.out))
 
 
-Progress = Callable[[int, int, "Row"], None]
+JobDone = Callable[[int, int, "Row"], None]
 
 
 def run_batch(
     jobs: Sequence[Job],
     out_dir: Path,
     client: Client | None = None,
-    progress: Progress | None = None,
+    progress: JobDone | None = None,
     remote: bool = False,
 ) -> list[Row]:
     """Run every job (here, or on ``client``), commit each one's folder, write batch.csv.

@@ -14,7 +14,7 @@ import csv
 import io
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +24,7 @@ from urpt_gcs.bench import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.files.formats.gtsplib import BENCH_FLAG, read_gtsplib
 from urpt_gcs.files.output import write_all
+from urpt_gcs.progress import Progress
 from urpt_gcs.site.inputs import GTSPLIB_MAX_BYTES, read_capped
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.visibility.cover import Instance
@@ -37,8 +38,6 @@ DEFAULT_TIME_LIMIT_S = 10.0
 # The bar: ahead of the baseline on every instance with at least this many clusters.
 LARGE_CLUSTERS = 40
 _GLNS_COLUMNS = ("glns_default_mean_cost", "glns_default_mean_gap_pct", "glns_default_mean_time_s")
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True, slots=True)

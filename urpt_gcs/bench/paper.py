@@ -31,12 +31,14 @@ import numpy as np
 import pyproj
 from affine import Affine
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.bench import rows_csv
 from urpt_gcs.bound.certificate import Certificate, certify, finer_stars, outer_regions
 from urpt_gcs.files.output import write_all
 from urpt_gcs.flight.refinement import Site, refine_along, refine_tour
-from urpt_gcs.site.terrain import FloatArray, Terrain
+from urpt_gcs.progress import Progress
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import SOLVERS, SolveSettings, Tour, solve
 from urpt_gcs.solvers.approx import paper_path
 from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
@@ -69,7 +71,6 @@ PAPER_PROVEN: dict[tuple[int, float, int], int] = {
 if TYPE_CHECKING:
     from distributed import Client
 
-Progress = Callable[[str], None]
 Key = tuple[int, int, float, int]  # one instance: terrain, m, fov, d
 
 

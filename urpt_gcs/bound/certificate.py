@@ -22,9 +22,10 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.flight.refinement import points_along
-from urpt_gcs.site.terrain import FloatArray, Terrain
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers.regions import OuterStar, RegionSet
 from urpt_gcs.visibility.regions import FINER_SPLIT, STAR_SECTORS, Camera, finer_wedges, star_reach
 

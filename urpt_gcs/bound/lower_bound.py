@@ -41,8 +41,8 @@ import numpy as np
 import numpy.typing as npt
 from shapely.geometry import Polygon
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.order_bound import order_bound
-from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers.regions import OuterStar, RegionSet
 
 I64 = npt.NDArray[np.int64]

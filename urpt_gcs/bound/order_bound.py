@@ -41,7 +41,7 @@ import shapely
 from scipy.spatial import ConvexHull, QhullError
 from shapely.geometry import LineString, Point, Polygon
 
-from urpt_gcs.site.terrain import FloatArray
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.solvers.regions import OuterStar
 
 I64 = npt.NDArray[np.int64]

@@ -21,10 +21,11 @@ from matplotlib.patches import FancyArrow
 from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.transforms import Affine2D
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.files.report import flight_quality, flown_stops, sortie_colour
 from urpt_gcs.flight.mission import waypoint_positions
 from urpt_gcs.pipeline.planner import Plan
-from urpt_gcs.site.terrain import WGS84, FloatArray, Terrain
+from urpt_gcs.site.terrain import WGS84, Terrain
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.
 _MAX_DISPLAY_PX = 1600

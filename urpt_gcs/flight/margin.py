@@ -17,7 +17,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import numpy.typing as npt
 
-from urpt_gcs.site.terrain import FloatArray, Terrain
+from urpt_gcs.arrays import FloatArray
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.cover import cover_sets
 from urpt_gcs.visibility.regions import Camera, line_of_sight

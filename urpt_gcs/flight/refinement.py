@@ -32,10 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.flight.margin import RING_POINTS
-from urpt_gcs.site.terrain import FloatArray, Terrain
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
-from urpt_gcs.visibility.regions import BoolArray, Camera, line_of_sight
+from urpt_gcs.visibility.regions import Camera, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
 
 # Fractions of the way to the line between the neighbours, tried each sweep.

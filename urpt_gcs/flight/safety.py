@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import PlanError
-from urpt_gcs.site.terrain import FloatArray, Terrain
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.segments import segment_profile
 
 

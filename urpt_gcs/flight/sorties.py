@@ -22,8 +22,8 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
+from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.flight.safety import FlightModel, Sortie, split_sorties
-from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers import Tour
 
 # The share of --time-limit the search may spend (on top of the solve), and how many of each
@@ -33,8 +33,6 @@ NEIGHBOURS = 8
 # Or-opt moves segments of up to this many stops.
 SEGMENT_MAX = 3
 _EPS_S = 1e-6
-
-IntArray = np.ndarray
 
 
 @dataclass(frozen=True, slots=True)

@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.pipeline.planner import (
     Plan,
-    Progress,
     _altitude_rel,
     _Area,
     _latlon,
@@ -43,8 +43,8 @@ from urpt_gcs.pipeline.planner import (
     flight_model,
 )
 from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, SeparationMode, VehicleSpec
+from urpt_gcs.progress import Progress
 from urpt_gcs.site.targets import TargetSet
-from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers import choose, prepare, solve
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.fleet import (

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -18,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pyproj
 
+from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.bound.certificate import (
     Certificate,
     bound_time_s,
@@ -45,15 +45,15 @@ from urpt_gcs.flight.safety import (
     split_sorties,
 )
 from urpt_gcs.flight.sorties import SEARCH_SHARE, SortieOrder, order_sorties
+from urpt_gcs.memory import require_memory
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.progress import Progress
 from urpt_gcs.site.camera import true_bearing_deg
-from urpt_gcs.site.inputs import require_memory
 from urpt_gcs.site.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.site.terrain import (
     WGS84,
     BlockCache,
     DemInfo,
-    FloatArray,
     Terrain,
     area_max,
     check_elevations,
@@ -66,12 +66,7 @@ from urpt_gcs.site.terrain import (
 from urpt_gcs.solvers import Tour, choose, prepare, solve
 from urpt_gcs.solvers.base import geometric_lower_bound
 from urpt_gcs.visibility.cover import Instance, build_instance, cover_sets, instance_bytes
-from urpt_gcs.visibility.regions import (
-    BoolArray,
-    Camera,
-    Region,
-    visibility_regions,
-)
+from urpt_gcs.visibility.regions import Camera, Region, visibility_regions
 
 if TYPE_CHECKING:
     from urpt_gcs.pipeline.altitude import AltitudeSweep
@@ -164,9 +159,6 @@ class Plan:
     @property
     def altitude_rel_m(self) -> float:
         return self.mission.altitude_rel_m
-
-
-Progress = Callable[[str], None]
 
 
 def _pick_home(targets: TargetSet, settings: PlanSettings) -> tuple[float, float, str]:

@@ -20,18 +20,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyproj
 from scipy.ndimage import minimum_filter1d
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle, Separation
 from urpt_gcs.flight.mission import Mission
+from urpt_gcs.progress import Progress
 from urpt_gcs.replay.fly import (
     CONNECT_TIMEOUT_S,
     SIMULATED,
@@ -48,7 +49,6 @@ from urpt_gcs.sim.settings import VehicleSettings
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.site.terrain import open_dem
 
-Progress = Callable[[str], None]
 # Altitude layers: a vehicle holds its altitude to well under a metre (ArduCopter SITL: 0.01 m
 # at its photos); this much below the spacing is still separation.
 ALTITUDE_TOLERANCE_M = 2.0
@@ -58,7 +58,6 @@ SAME_PAD_M = 1.0
 ON_GROUND_M = 1.0
 # Positions whose delivery delay is estimated together (about half a second at 20x).
 DELAY_WINDOW = 101
-FloatArray = np.ndarray[Any, np.dtype[np.float64]]
 _ECEF = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
 
 

@@ -45,6 +45,7 @@ from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.files.formats import read_plan, read_waypoints
 from urpt_gcs.flight.geofence import Geofence, read_plan_geofence
 from urpt_gcs.flight.mission import Mission, command_name
+from urpt_gcs.progress import Progress
 from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sim.params import AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE
 from urpt_gcs.sim.server import SitlServer
@@ -55,7 +56,6 @@ from urpt_gcs.site.terrain import open_dem
 from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload_verified
 from urpt_gcs.vehicle.mavsdk_link import MavsdkLink, connect
 
-Progress = Callable[[str], None]
 TakeoffMethod = Literal["auto-options", "guided"]
 GUIDED_TAKEOFF_M = 10.0
 CONNECT_TIMEOUT_S = 10.0

@@ -14,9 +14,8 @@ import numpy as np
 import numpy.typing as npt
 import pyproj
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import SettingsError
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)

@@ -40,10 +40,11 @@ from numba import njit
 from pyproj.aoi import AreaOfInterest
 from pyproj.database import query_utm_crs_info
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import DemError
-from urpt_gcs.site.inputs import require_memory, require_regular_file
+from urpt_gcs.memory import require_memory
+from urpt_gcs.site.inputs import require_regular_file
 
-FloatArray = npt.NDArray[np.float64]
 # Elevations as stored: float32 where that holds the source's values exactly, else float64.
 ElevationArray = npt.NDArray[np.float32] | npt.NDArray[np.float64]
 

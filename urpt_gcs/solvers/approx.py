@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers.base import (
     DISC_PACKING_ALPHA,
     SolveSettings,

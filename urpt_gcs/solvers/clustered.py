@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from urpt_gcs.site.inputs import require_memory
-from urpt_gcs.site.terrain import FloatArray
-from urpt_gcs.visibility.cover import Instance, IntArray, euclidean_matrix
+from urpt_gcs.arrays import FloatArray, IntArray
+from urpt_gcs.memory import require_memory
+from urpt_gcs.visibility.cover import Instance, euclidean_matrix
 
 
 @dataclass(frozen=True, slots=True)

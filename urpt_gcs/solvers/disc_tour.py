@@ -32,10 +32,8 @@ import numba as nb
 import numpy as np
 from scipy.spatial import cKDTree
 
-from urpt_gcs.site.terrain import FloatArray
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.solvers.refine import best_on_disc
-from urpt_gcs.visibility.cover import IntArray
-from urpt_gcs.visibility.regions import BoolArray
 
 # Nearest discs considered for a move. (With 10, some tours of 100-200 discs were local
 # optima that no kick left: suri_CETSP-100-4 stuck 0.18 % above its optimum.)

@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.site.inputs import require_memory
+from urpt_gcs.memory import require_memory
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.clustered import cluster_instance, partition_nodes, viewpoint_order
 from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix

@@ -26,13 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.flight.safety import FlightModel, split_sorties
-from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.visibility.cover import Covers, Geometry, Instance
-
-IntArray = npt.NDArray[np.int64]
 
 # A move must shorten the flights it changes by this much to be kept.
 _EPS_S = 1e-6

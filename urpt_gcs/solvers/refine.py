@@ -18,9 +18,8 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point
 
-from urpt_gcs.site.terrain import FloatArray
+from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.solvers.regions import RegionSet
-from urpt_gcs.visibility.cover import IntArray
 
 # Sweeps stop once one gains less than this fraction of the tour.
 _SWEEP_GAIN = 1e-10

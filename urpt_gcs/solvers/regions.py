@@ -18,10 +18,9 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.site.terrain import FloatArray
-from urpt_gcs.visibility.cover import Instance, IntArray
-from urpt_gcs.visibility.regions import BoolArray
+from urpt_gcs.visibility.cover import Instance
 
 # Sectors of an outer star: fine enough that a piece's reach follows the region.
 STAR_SECTORS = 64

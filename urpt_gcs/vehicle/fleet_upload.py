@@ -10,7 +10,7 @@ reported as failed with the reason; one vehicle's failure does not stop the othe
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -18,9 +18,8 @@ from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle
 from urpt_gcs.flight.geofence import Geofence
 from urpt_gcs.flight.mission import Mission
+from urpt_gcs.progress import Progress
 from urpt_gcs.vehicle.link import UploadReport, UploadSettings, refuse_unfit, upload_with_fence
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True, slots=True)

@@ -41,6 +41,7 @@ from urpt_gcs.flight.mission import (
     command_name,
     upload_problem,
 )
+from urpt_gcs.progress import Progress
 from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
@@ -51,7 +52,6 @@ STARTING_WAIT_S = 30.0
 STARTING_FIRST_PAUSE_S = 0.5
 STARTING_MAX_PAUSE_S = 4.0
 AutopilotKind = Literal["ardupilot", "px4", "unknown"]
-Progress = Callable[[str], None]
 _NAMES = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
 
 

@@ -18,11 +18,10 @@ import numpy as np
 import numpy.typing as npt
 import shapely
 
-from urpt_gcs.site.inputs import require_memory
-from urpt_gcs.site.terrain import FloatArray, Terrain
-from urpt_gcs.visibility.regions import BoolArray, Camera, Region, line_of_sight
-
-IntArray = npt.NDArray[np.int64]
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
+from urpt_gcs.memory import require_memory
+from urpt_gcs.site.terrain import Terrain
+from urpt_gcs.visibility.regions import Camera, Region, line_of_sight
 
 # How far boundary samples are pulled towards their target, in DEM cells, on each try.
 _INSETS_CELLS = (1.0, 2.0, 4.0)

@@ -29,12 +29,11 @@ import shapely
 from numba import njit
 from shapely.geometry import Polygon
 
+from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.site.camera import Frame
-from urpt_gcs.site.terrain import FloatArray, Terrain, bilinear_at
+from urpt_gcs.site.terrain import Terrain, bilinear_at
 from urpt_gcs.visibility.segments import clear_of_terrain, resolve_workers
-
-BoolArray = npt.NDArray[np.bool_]
 
 # Below this many targets per thread a thread pool costs more than it saves.
 _MIN_PARALLEL_TARGETS = 64

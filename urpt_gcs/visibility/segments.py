@@ -27,9 +27,8 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from urpt_gcs.site.terrain import FloatArray, Terrain
-
-BoolArray = npt.NDArray[np.bool_]
+from urpt_gcs.arrays import BoolArray, FloatArray
+from urpt_gcs.site.terrain import Terrain
 
 # Terrain less than this above a line of sight does not block it: the target itself lies on
 # the surface, so at its end the difference is zero up to rounding.

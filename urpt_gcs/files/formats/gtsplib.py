@@ -28,12 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.files.output import check_file, commit
 from urpt_gcs.site.inputs import GTSPLIB_MAX_BYTES, read_capped
-from urpt_gcs.site.terrain import FloatArray
 from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
-from urpt_gcs.visibility.regions import BoolArray
 
 __all__ = ["export_gtsplib", "read_gtsplib", "read_tour", "write_gtsplib"]
 
