@@ -524,6 +524,7 @@ def output_folders(jobs: Sequence[Job], out_dir: Path) -> None:
         check_out(Path(job.out))
 
 
+# Called as each job ends: (jobs done, jobs in all, its row).
 JobDone = Callable[[int, int, "Row"], None]
 
 
