@@ -7,7 +7,7 @@ Targets are placed on valid ground of a real raster beside the checkout (``../sh
 as the tests place them). Every vehicle flies the same layer from the same home, so the
 naive split is exactly defined: the single-vehicle tour (solved once, its share of the time
 limit) cut into K contiguous pieces of least longest flight, each piece flown as cut from
-home. Ours is :func:`urpt_gcs.solvers.fleet.plan_fleet` from that same tour (pieces
+home. Ours is :func:`urpt_gcs.solvers.fleet.solve_fleet` from that same tour (pieces
 re-solved, stops moved between vehicles, per-vehicle GTSP re-solves). Flight times are the
 single-vehicle model's (take-off, legs, holds, return, landing; sorties within the
 endurance). Start delays for separation are not part of these figures.
@@ -34,7 +34,7 @@ from urpt_gcs.pipeline.settings import (  # noqa: E402
 )
 from urpt_gcs.solvers import choose, prepare, solve  # noqa: E402
 from urpt_gcs.solvers.base import SolveSettings  # noqa: E402
-from urpt_gcs.solvers.fleet import SINGLE_SHARE, makespan_bound, plan_fleet  # noqa: E402
+from urpt_gcs.solvers.fleet import SINGLE_SHARE, makespan_bound, solve_fleet  # noqa: E402
 
 
 def _minutes(seconds: float) -> str:
@@ -92,7 +92,9 @@ def main() -> None:
     budget = args.time_limit - single_s
     for k in range(1, args.max_vehicles + 1):
         fleet = [vehicle] * k
-        tours = plan_fleet(fleet, single.order, reference, "auto", SolveSettings(budget, args.seed))
+        tours = solve_fleet(
+            fleet, single.order, reference, "auto", SolveSettings(budget, args.seed)
+        )
         bound = makespan_bound(fleet, single.lower_bound)
         ours, naive = tours.makespan_s, tours.naive_makespan_s
         gap = (ours - bound.bound_s) / bound.bound_s

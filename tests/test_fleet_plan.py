@@ -23,7 +23,7 @@ from urpt_gcs.pipeline.fleet import Track, _pair_closest, closest, timing_slack_
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import solve
 from urpt_gcs.solvers.base import SolveSettings
-from urpt_gcs.solvers.fleet import Vehicle, makespan_bound, plan_fleet, restrict
+from urpt_gcs.solvers.fleet import Vehicle, makespan_bound, restrict, solve_fleet
 from urpt_gcs.visibility.cover import Geometry, Instance
 
 ALTITUDE_M = 40.0
@@ -101,7 +101,7 @@ def test_bound_and_planned_makespan_bracket_the_brute_force_optimum(
     vehicles, reference = _tiny_fleet(seed, count, endurance_s)
     optimum = _brute_makespan(vehicles)
     single = solve(reference, "exact", SolveSettings(time_limit_s=0.5))
-    tours = plan_fleet(vehicles, single.order, reference, "exact", SolveSettings(time_limit_s=1.0))
+    tours = solve_fleet(vehicles, single.order, reference, "exact", SolveSettings(time_limit_s=1.0))
     bound = makespan_bound(vehicles, single.lower_bound)
     assert 0.0 < bound.bound_s <= optimum + 1e-6
     assert tours.makespan_s >= optimum - 1e-6
@@ -340,7 +340,7 @@ def test_one_vehicle_is_the_plain_plan(monkeypatch: pytest.MonkeyPatch, tmp_path
         raise AssertionError("the fleet planner ran for one vehicle")
 
     monkeypatch.setattr(urpt_gcs.pipeline.planner, "plan", record)
-    monkeypatch.setattr(urpt_gcs.pipeline.fleet, "plan_fleet_mission", no_fleet)
+    monkeypatch.setattr(urpt_gcs.pipeline.fleet, "plan_fleet", no_fleet)
     base = ["plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml")]
     for extra in ([], ["--vehicles", "1"]):
         CliRunner().invoke(main, [*base, "--out", str(tmp_path / "o"), *extra])

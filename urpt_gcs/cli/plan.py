@@ -440,13 +440,13 @@ def _plan_fleet(
         fleet_summary_text,
         write_fleet_products,
     )
-    from urpt_gcs.pipeline.fleet import plan_fleet_mission
+    from urpt_gcs.pipeline.fleet import plan_fleet
 
     destinations = check_fleet_out(out, len(fleet.vehicles))
     live = sys.stderr.isatty()
     with StageProgress(stream, settings.solve.time_limit_s, live=live) as progress:
         say = None if quiet or as_json else progress
-        result = plan_fleet_mission(dem, targets, settings, fleet, progress=say)
+        result = plan_fleet(dem, targets, settings, fleet, progress=say)
         if say is not None:
             say("writing outputs")
         data = write_fleet_products(result, destinations, with_map=not no_map)

@@ -4,7 +4,7 @@ The stages are the single-vehicle plan's, once per vehicle where they depend on 
 vehicle flies its own altitude layer from its own home (``--separation altitude``: layer k is
 the first layer plus ``(k - 1) * --layer-spacing``), so its DEM window, visibility regions
 and viewpoints are its own (the camera cone's footprint grows with altitude). The targets are
-shared out by :func:`urpt_gcs.solvers.fleet.plan_fleet`; each vehicle's share then goes
+shared out by :func:`urpt_gcs.solvers.fleet.solve_fleet`; each vehicle's share then goes
 through the rest of the single-vehicle chain (margins, sorties, missions checked as written),
 so every vehicle's plan is an ordinary :class:`~urpt_gcs.pipeline.planner.Plan`.
 
@@ -53,8 +53,8 @@ from urpt_gcs.solvers.fleet import (
     MakespanBound,
     Vehicle,
     makespan_bound,
-    plan_fleet,
     restrict,
+    solve_fleet,
     with_home,
 )
 from urpt_gcs.visibility.cover import Instance, build_instance
@@ -212,7 +212,7 @@ def fleet_problem(
     return FleetProblem(site, tuple(layers), vehicles, reference, widest, settings.gsd_cm)
 
 
-def plan_fleet_mission(
+def plan_fleet(
     dem_path: Path,
     targets_path: Path,
     settings: PlanSettings,
@@ -248,7 +248,7 @@ def plan_fleet_mission(
     stages.lap("single")
     budget = settings.solve.time_limit_s - single_s
     stages.say(f"sharing the targets among {len(vehicles)} vehicles (up to {budget:.1f} s)")
-    tours = plan_fleet(
+    tours = solve_fleet(
         vehicles,
         single.order,
         reference,
@@ -720,6 +720,6 @@ __all__ = [
     "Separation",
     "closest",
     "fleet_problem",
-    "plan_fleet_mission",
+    "plan_fleet",
     "track",
 ]

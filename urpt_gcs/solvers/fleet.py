@@ -484,7 +484,7 @@ def naive_split(
     return pieces, times, cut
 
 
-def plan_fleet(
+def solve_fleet(
     vehicles: Sequence[Vehicle],
     single_order: Sequence[int],
     reference: Instance,
