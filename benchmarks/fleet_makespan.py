@@ -92,9 +92,8 @@ def main() -> None:
     budget = args.time_limit - single_s
     for k in range(1, args.max_vehicles + 1):
         fleet = [vehicle] * k
-        tours = solve_fleet(
-            fleet, single.order, reference, "auto", SolveSettings(budget, args.seed)
-        )
+        settings = SolveSettings(budget, args.seed)
+        tours = solve_fleet(fleet, single.order, reference, "auto", settings)
         bound = makespan_bound(fleet, single.lower_bound)
         ours, naive = tours.makespan_s, tours.naive_makespan_s
         gap = (ours - bound.bound_s) / bound.bound_s
