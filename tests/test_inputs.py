@@ -18,8 +18,9 @@ from urpt_gcs.memory import (
     memory_budget_bytes,
     require_memory,
 )
+from urpt_gcs.site.dem import open_dem
 from urpt_gcs.site.inputs import read_capped, require_regular_file
-from urpt_gcs.site.terrain import open_dem, read_terrain
+from urpt_gcs.site.reading import read_terrain
 
 
 def _read(path: Path, cap: int = 1024) -> bytes:

@@ -8,14 +8,8 @@ import numpy as np
 import rasterio
 from rasterio.transform import from_origin
 
-from urpt_gcs.site.terrain import (
-    BlockCache,
-    area_max,
-    fill_along,
-    open_dem,
-    read_mosaic,
-    read_terrain,
-)
+from urpt_gcs.site.dem import open_dem
+from urpt_gcs.site.reading import BlockCache, area_max, fill_along, read_mosaic, read_terrain
 from urpt_gcs.visibility.segments import segment_profile
 
 ORIGIN = (500_000.0, 5_200_000.0)

@@ -17,14 +17,8 @@ from rasterio.windows import Window
 from urpt_gcs.errors import DemError
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
-from urpt_gcs.site.terrain import (
-    check_elevations,
-    open_dem,
-    planning_crs,
-    read_terrain,
-    scale_error,
-    vertical_unit,
-)
+from urpt_gcs.site.dem import check_elevations, open_dem, planning_crs, scale_error, vertical_unit
+from urpt_gcs.site.reading import read_terrain
 from urpt_gcs.solvers import SolveSettings
 
 ORIGIN = (500_000.0, 5_200_000.0)

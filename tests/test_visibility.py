@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.site.terrain import open_dem, read_terrain
+from urpt_gcs.site.dem import open_dem
+from urpt_gcs.site.reading import read_terrain
 from urpt_gcs.visibility.regions import (
     Camera,
     azimuths,

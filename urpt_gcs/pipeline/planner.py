@@ -49,20 +49,10 @@ from urpt_gcs.memory import require_memory
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.camera import true_bearing_deg
+from urpt_gcs.site.dem import WGS84, DemInfo, check_elevations, open_dem, planning_crs
+from urpt_gcs.site.reading import BlockCache, area_max, fill_along, read_mosaic, sample_points
 from urpt_gcs.site.targets import SWAP_FIX, Target, TargetSet, read_targets
-from urpt_gcs.site.terrain import (
-    WGS84,
-    BlockCache,
-    DemInfo,
-    Terrain,
-    area_max,
-    check_elevations,
-    fill_along,
-    open_dem,
-    planning_crs,
-    read_mosaic,
-    sample_points,
-)
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour, choose, prepare, solve
 from urpt_gcs.solvers.base import geometric_lower_bound
 from urpt_gcs.visibility.cover import Instance, build_instance, cover_sets, instance_bytes

@@ -46,8 +46,8 @@ from urpt_gcs.replay.fly import (
 from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.settings import VehicleSettings
+from urpt_gcs.site.dem import open_dem
 from urpt_gcs.site.targets import read_targets
-from urpt_gcs.site.terrain import open_dem
 
 # Altitude layers: a vehicle holds its altitude to well under a metre (ArduCopter SITL: 0.01 m
 # at its photos); this much below the spacing is still separation.

@@ -50,9 +50,9 @@ from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judg
 from urpt_gcs.sim.params import AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.settings import VehicleSettings
+from urpt_gcs.site.dem import open_dem
 from urpt_gcs.site.inputs import MISSION_FILE_MAX_BYTES, read_capped
 from urpt_gcs.site.targets import read_targets
-from urpt_gcs.site.terrain import open_dem
 from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload_verified
 from urpt_gcs.vehicle.mavsdk_link import MavsdkLink, connect
 

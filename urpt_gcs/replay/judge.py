@@ -38,8 +38,10 @@ from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.files.formats.qgc_plan import read_replay_check
 from urpt_gcs.flight.mission import Mission, photo_headings, waypoint_positions
 from urpt_gcs.site.camera import Frame, grid_bearing_deg
+from urpt_gcs.site.dem import WGS84, open_dem, planning_crs
+from urpt_gcs.site.reading import read_terrain
 from urpt_gcs.site.targets import Target, read_targets
-from urpt_gcs.site.terrain import WGS84, Terrain, open_dem, planning_crs, read_terrain
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import in_frame, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
 
