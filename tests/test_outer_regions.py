@@ -17,15 +17,8 @@ from rasterio.transform import Affine
 from scipy.ndimage import map_coordinates
 
 from urpt_gcs.site.terrain import Terrain
-from urpt_gcs.visibility.regions import (
-    Camera,
-    azimuths,
-    finer_reach,
-    finer_wedges,
-    line_of_sight,
-    ray_reach,
-    star_reach,
-)
+from urpt_gcs.visibility.regions import Camera, azimuths, line_of_sight, ray_reach
+from urpt_gcs.visibility.stars import finer_reach, finer_wedges, star_reach
 
 ORIGIN = (500_000.0, 5_200_000.0)
 RES = 0.5

@@ -1,7 +1,7 @@
 """Certificate: how far, at most, a flight is from the shortest one any planner could find.
 
 Every point of the flight plane that sees a target lies in the target's outer star
-(:func:`urpt_gcs.visibility.regions.star_reach`, exact on the DEM's bilinear surface and the
+(:func:`urpt_gcs.visibility.stars.star_reach`, exact on the DEM's bilinear surface and the
 camera).
 A closed flight from home that photographs every target enters every outer star, so the
 certified lower bound of :mod:`urpt_gcs.bound.lower_bound` over those stars bounds the length of
@@ -27,7 +27,8 @@ from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.flight.refinement import points_along
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers.regions import OuterStar, RegionSet
-from urpt_gcs.visibility.regions import FINER_SPLIT, STAR_SECTORS, Camera, finer_wedges, star_reach
+from urpt_gcs.visibility.regions import Camera
+from urpt_gcs.visibility.stars import FINER_SPLIT, STAR_SECTORS, finer_wedges, star_reach
 
 # Below this gap a tour is called optimal: its length is within it of the certified bound.
 PROVEN_GAP = 1e-4
@@ -221,7 +222,7 @@ def finer_stars(
     """What tightens the outer stars of :func:`outer_regions` (made with the same terrain,
     camera and ``hold_m``) where a relaxed tour meets them: each star it passes near the
     edge (within :data:`_NEAR_EDGE` of a sector's reach, and farther out than the star is
-    surely seen) is walked again whole by :func:`urpt_gcs.visibility.regions.finer_wedges`, every
+    surely seen) is walked again whole by :func:`urpt_gcs.visibility.stars.finer_wedges`, every
     sector split in two, until it has :data:`FINER_SPLIT` times its first sectors. The stars
     still hold every point that sees their targets.
 

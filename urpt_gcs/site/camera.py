@@ -17,6 +17,16 @@ import pyproj
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import SettingsError
 
+__all__ = [
+    "CAMERAS",
+    "CameraPreset",
+    "Frame",
+    "camera_preset",
+    "frame_from_flags",
+    "grid_bearing_deg",
+    "true_bearing_deg",
+]
+
 
 @dataclass(frozen=True, slots=True)
 class Frame:

@@ -25,6 +25,21 @@ from rasterio.transform import Affine
 
 from urpt_gcs.errors import OutputError, SettingsError
 
+__all__ = [
+    "EPSG",
+    "KML_NS",
+    "NODATA",
+    "NORTH_M",
+    "RES_M",
+    "SIZE_M",
+    "SIZE_PX",
+    "WEST_M",
+    "DemoPoint",
+    "DemoSite",
+    "Grid",
+    "make_demo_site",
+]
+
 EPSG = 32632
 WEST_M, NORTH_M = 531_500.0, 5_282_200.0
 RES_M = 0.5

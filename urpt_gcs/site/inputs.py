@@ -20,6 +20,15 @@ from pathlib import Path
 
 from urpt_gcs.errors import UrptError
 
+__all__ = [
+    "GTSPLIB_MAX_BYTES",
+    "MISSION_FILE_MAX_BYTES",
+    "TARGETS_MAX_BYTES",
+    "read_capped",
+    "require_regular_file",
+    "shown_path",
+]
+
 # Size caps of text inputs: far above any real file, far below what would exhaust memory.
 TARGETS_MAX_BYTES = 64 * 2**20
 MISSION_FILE_MAX_BYTES = 16 * 2**20

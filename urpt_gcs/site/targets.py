@@ -28,6 +28,8 @@ from defusedxml import DefusedXmlException
 from urpt_gcs.errors import TargetsError
 from urpt_gcs.site.inputs import TARGETS_MAX_BYTES, read_capped
 
+__all__ = ["HOME_NAMES", "SAME_PLACE_DEG", "SWAP_FIX", "Target", "TargetSet", "read_targets"]
+
 
 @dataclass(frozen=True, slots=True)
 class Target:

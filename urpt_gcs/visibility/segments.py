@@ -20,6 +20,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -29,6 +30,15 @@ from numba import njit
 
 from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.site.terrain import Terrain
+
+__all__ = [
+    "SIGHT_TOLERANCE_M",
+    "SegmentProfile",
+    "clear_of_terrain",
+    "in_threads",
+    "resolve_workers",
+    "segment_profile",
+]
 
 # Terrain less than this above a line of sight does not block it: the target itself lies on
 # the surface, so at its end the difference is zero up to rounding.
@@ -40,6 +50,21 @@ _MIN_PARALLEL_SEGMENTS = 4096
 def resolve_workers(workers: int | None) -> int:
     """The number of threads segment tests use: ``workers``, or every core when None."""
     return max(1, os.cpu_count() or 1) if workers is None else max(1, int(workers))
+
+
+def in_threads(
+    run: Callable[[int, int], None], count: int, workers: int | None, least: int, parts: int
+) -> None:
+    """``run(lo, hi)`` over ``0 .. count`` in ``parts`` ranges per thread, a thread per
+    ``least`` items at most (one range when a single thread is used)."""
+    threads = min(resolve_workers(workers), max(count // least, 1))
+    if threads <= 1:
+        run(0, count)
+        return
+    bounds = np.linspace(0, count, parts * threads + 1).astype(np.intp).tolist()
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(run, lo, hi) for lo, hi in itertools.pairwise(bounds)]:
+            future.result()
 
 
 @dataclass(frozen=True, slots=True)
