@@ -26,6 +26,7 @@ test: $(VENV)/.installed-test
 	$(BIN)/ruff check urpt_gcs tests
 	$(BIN)/ruff format --check urpt_gcs tests
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest
 
 # Regenerate the demo site (it is committed; this is how it was made).
@@ -33,4 +34,4 @@ demo-site: $(VENV)/.installed
 	$(BIN)/urpt-gcs demo-site --out missions/demo
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache .import_linter_cache
