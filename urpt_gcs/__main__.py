@@ -90,3 +90,5 @@ def run() -> None:
 
 if __name__ == "__main__":
     run()
+
+__all__ = ["run"]

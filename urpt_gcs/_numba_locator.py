@@ -44,3 +44,6 @@ def _package_digest() -> str:
         digest.update(b"\0")
         digest.update(source.read_bytes())
     return digest.hexdigest()[:16]
+
+
+__all__ = ["KernelCacheLocator"]

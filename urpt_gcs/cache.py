@@ -82,3 +82,6 @@ def configure_numba_cache() -> Path:
         config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
         config.CACHE_LOCATOR_CLASSES = os.environ["NUMBA_CACHE_LOCATOR_CLASSES"]
     return folder
+
+
+__all__ = ["APP_NAME", "configure_numba_cache", "default_cache_dir"]

@@ -61,3 +61,17 @@ class ClusterError(UrptError, ConnectionError):
 
 class LinkError(UrptError, ConnectionError):
     """The vehicle cannot be reached, or it did not accept the mission as sent."""
+
+
+__all__ = [
+    "ClusterError",
+    "DemError",
+    "JobsFileError",
+    "LinkError",
+    "MissionFileError",
+    "OutputError",
+    "PlanError",
+    "SettingsError",
+    "TargetsError",
+    "UrptError",
+]

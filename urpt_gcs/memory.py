@@ -77,3 +77,6 @@ def require_memory(nbytes: float, what: str, fix: str) -> None:
             f"{what} would need {_gib(nbytes)}, over the memory budget of "
             f"{_gib(budget)} ({MEMORY_BUDGET_ENV}): {fix}"
         )
+
+
+__all__ = ["MEMORY_BUDGET_ENV", "MemoryBudgetError", "memory_budget_bytes", "require_memory"]

@@ -101,3 +101,6 @@ class StageProgress:
                     self._stream.write(f"\r{self._line()}")
                     self._stream.flush()
                     self._shown = True
+
+
+__all__ = ["Progress", "StageProgress"]
