@@ -66,6 +66,9 @@ def _leave_interrupted() -> None:
         os._exit(INTERRUPTED_EXIT)
 
 
+__all__ = ["run"]
+
+
 def run() -> None:
     """Run the command line on ``sys.argv``; Ctrl-C at any moment exits 130 with one line."""
     sys.unraisablehook = _interrupt_again
@@ -90,5 +93,3 @@ def run() -> None:
 
 if __name__ == "__main__":
     run()
-
-__all__ = ["run"]
