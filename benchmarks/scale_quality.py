@@ -33,7 +33,7 @@ from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.solvers import SolveSettings, Tour, solve
 from urpt_gcs.solvers.clustered import partition_nodes
 from urpt_gcs.solvers.routing import MAX_NODES
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.instance import Instance
 
 
 def _checked(instance: Instance, tour: Tour) -> Tour:

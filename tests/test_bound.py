@@ -14,7 +14,7 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.bench.cetsp import read_instance
 from urpt_gcs.bound.lower_bound import lower_bound, skipped_regions, start_pieces
-from urpt_gcs.solvers.regions import RegionSet
+from urpt_gcs.problem.regions import RegionSet
 
 
 def _disc_grid(x: float, y: float, r: float, k: int) -> np.ndarray:
@@ -150,7 +150,7 @@ def test_a_search_stopped_early_still_meets_every_region() -> None:
     """Stopped after a few nodes, before any polyline met every disc, the search dives for
     one: the polyline it returns passes within every disc (measured by shapely)."""
     from urpt_gcs.bound.order_bound import order_bound
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(7)
     n = 30
@@ -267,7 +267,7 @@ def test_star_piece_hulls_hold_their_star(sectors: int, run: int) -> None:
     # ``run`` sectors in a row share a reach (a finely walked star repeats each coarse
     # sector's reach, and the cone caps many sectors at one reach), some of them none.
     from urpt_gcs.bound.order_bound import star_hull
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(sectors)
     reach = np.repeat(rng.uniform(0.5, 10.0, sectors // run), run)
@@ -292,7 +292,7 @@ def test_a_finely_walked_star_has_no_more_hull_vertices_than_the_coarse_one() ->
     hull keeps the coarse star's vertex count (the search's node solves take time in
     proportion to it)."""
     from urpt_gcs.bound.order_bound import star_hull
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(3)
     coarse = rng.uniform(5.0, 10.0, 720)
@@ -308,7 +308,7 @@ def test_the_search_stops_once_the_bound_meets_its_shortest_polyline() -> None:
     gap target of the shortest polyline it met that meets every star: the bound can rise no
     further (it is the least over those polylines and the open nodes)."""
     from urpt_gcs.bound.order_bound import order_bound
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(12)
     stars: list[OuterStar | None] = []

@@ -43,7 +43,8 @@ from urpt_gcs.solvers import SOLVERS, SolveSettings, Tour, solve
 from urpt_gcs.solvers.approx import paper_path
 from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.solvers.exact import solve_exact
-from urpt_gcs.visibility.cover import Covers, Instance, build_instance
+from urpt_gcs.problem.instance import Covers, Instance
+from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Camera, visibility_regions
 
 SIZE = 200.0

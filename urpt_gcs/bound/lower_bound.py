@@ -43,7 +43,7 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.order_bound import order_bound
-from urpt_gcs.solvers.regions import OuterStar, RegionSet
+from urpt_gcs.problem.regions import OuterStar, RegionSet
 
 I64 = npt.NDArray[np.int64]
 

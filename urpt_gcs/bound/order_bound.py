@@ -42,7 +42,7 @@ from scipy.spatial import ConvexHull, QhullError
 from shapely.geometry import LineString, Point, Polygon
 
 from urpt_gcs.arrays import FloatArray
-from urpt_gcs.solvers.regions import OuterStar
+from urpt_gcs.problem.regions import OuterStar
 
 I64 = npt.NDArray[np.int64]
 

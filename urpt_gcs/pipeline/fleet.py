@@ -57,7 +57,8 @@ from urpt_gcs.solvers.fleet import (
     solve_fleet,
     with_home,
 )
-from urpt_gcs.visibility.cover import Instance, build_instance
+from urpt_gcs.problem.instance import Instance
+from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 
 # Start delays are searched in whole steps of this, up to the undelayed makespan.

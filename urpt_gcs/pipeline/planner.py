@@ -65,7 +65,8 @@ from urpt_gcs.site.terrain import (
 )
 from urpt_gcs.solvers import Tour, choose, prepare, solve
 from urpt_gcs.solvers.base import geometric_lower_bound
-from urpt_gcs.visibility.cover import Instance, build_instance, cover_sets, instance_bytes
+from urpt_gcs.problem.instance import Instance, instance_bytes
+from urpt_gcs.visibility.cover import build_instance, cover_sets
 from urpt_gcs.visibility.regions import Camera, Region, visibility_regions
 
 if TYPE_CHECKING:

@@ -14,7 +14,7 @@ from urpt_gcs.solvers.base import Solver, SolveSettings, Tour
 from urpt_gcs.solvers.exact import ExactSolver, exact_work
 from urpt_gcs.solvers.heuristic import HeuristicSolver
 from urpt_gcs.solvers.routing import RoutingSolver
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.instance import Instance
 
 SOLVERS: dict[str, type[Solver]] = {
     "exact": ExactSolver,

@@ -43,7 +43,7 @@ from urpt_gcs.solvers.base import (
     geometric_lower_bound,
     greedy_disjoint,
 )
-from urpt_gcs.visibility.cover import Covers, Geometry, Instance
+from urpt_gcs.problem.instance import Covers, Geometry, Instance
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72

@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.instance import Instance
 
 # Tekdas et al.: a tour through k disjoint discs of radius r is at least k/2 * alpha * r (k >= 3).
 DISC_PACKING_ALPHA = 0.4786

@@ -5,7 +5,7 @@ shortest tour it finds that enters every region together with a certified lower 
 *every* such tour, not only those through its candidate points:
 
 1. discretise: candidate points on every region's boundary (and one inside), each covering
-   every region it lies in -- a generalized TSP (:class:`urpt_gcs.visibility.cover.Instance`);
+   every region it lies in -- a generalized TSP (:class:`urpt_gcs.problem.instance.Instance`);
 2. solve it with the GTSP solvers (:mod:`urpt_gcs.solvers`);
 3. refine the tour continuously with the order fixed (:mod:`urpt_gcs.solvers.refine`); for
    polygons, solve again with the refined points among the candidates and refine again;
@@ -30,8 +30,8 @@ from urpt_gcs.errors import PlanError
 from urpt_gcs.solvers import disc_tour, solve
 from urpt_gcs.solvers.base import SolveSettings, Tour
 from urpt_gcs.solvers.refine import closed_length, refine_touches
-from urpt_gcs.solvers.regions import RegionSet
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.regions import RegionSet
+from urpt_gcs.problem.instance import Instance
 
 # Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
 # _MIN_DISC_SAMPLES each).

@@ -46,7 +46,7 @@ from urpt_gcs.solvers.clustered import (
     require_partition_memory,
     viewpoint_order,
 )
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.instance import Instance
 
 I32 = npt.NDArray[np.int32]
 F64 = npt.NDArray[np.float64]

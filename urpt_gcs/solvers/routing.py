@@ -24,7 +24,7 @@ from urpt_gcs.solvers.clustered import (
     require_partition_memory,
     viewpoint_order,
 )
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.instance import Instance
 
 # Routing needs integer arc costs; scale so that centimetres (or GTSPLIB units) survive.
 _SCALE = 100.0
