@@ -13,11 +13,11 @@ from shapely.geometry import LineString, Point
 
 from urpt_gcs.bench.cetsp import COLUMNS, read_instance, read_published
 from urpt_gcs.cli import main
+from urpt_gcs.problem.regions import RegionSet
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import _from_relaxed, solve_regions
 from urpt_gcs.solvers.disc_tour import exact_positions, improve
 from urpt_gcs.solvers.refine import best_on_disc, closed_length, refine_touches
-from urpt_gcs.problem.regions import RegionSet
 
 
 def test_best_point_on_a_disc_matches_a_dense_search() -> None:

@@ -9,8 +9,8 @@ import pytest
 from affine import Affine
 
 from urpt_gcs.memory import MEMORY_BUDGET_ENV, MemoryBudgetError
-from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix, require_instance_memory
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.cover import cover_pairs, cover_sets
 from urpt_gcs.visibility.regions import Camera
 

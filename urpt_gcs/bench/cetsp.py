@@ -26,9 +26,9 @@ import numpy as np
 from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.files.output import write_all
+from urpt_gcs.problem.regions import RegionSet
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import solve_regions
-from urpt_gcs.problem.regions import RegionSet
 
 if TYPE_CHECKING:
     from distributed import Client

@@ -25,8 +25,8 @@ from shapely.geometry import Polygon
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.flight.refinement import points_along
-from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.problem.regions import OuterStar, RegionSet
+from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import FINER_SPLIT, STAR_SECTORS, Camera, finer_wedges, star_reach
 
 # Below this gap a tour is called optimal: its length is within it of the certified bound.

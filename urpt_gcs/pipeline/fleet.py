@@ -43,6 +43,7 @@ from urpt_gcs.pipeline.planner import (
     flight_model,
 )
 from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, SeparationMode, VehicleSpec
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.targets import TargetSet
 from urpt_gcs.solvers import choose, prepare, solve
@@ -57,7 +58,6 @@ from urpt_gcs.solvers.fleet import (
     solve_fleet,
     with_home,
 )
-from urpt_gcs.problem.instance import Instance
 from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 

@@ -47,6 +47,7 @@ from urpt_gcs.flight.safety import (
 from urpt_gcs.flight.sorties import SEARCH_SHARE, SortieOrder, order_sorties
 from urpt_gcs.memory import require_memory
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.problem.instance import Instance, instance_bytes
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.targets import SWAP_FIX, Target, TargetSet, read_targets
@@ -65,7 +66,6 @@ from urpt_gcs.site.terrain import (
 )
 from urpt_gcs.solvers import Tour, choose, prepare, solve
 from urpt_gcs.solvers.base import geometric_lower_bound
-from urpt_gcs.problem.instance import Instance, instance_bytes
 from urpt_gcs.visibility.cover import build_instance, cover_sets
 from urpt_gcs.visibility.regions import Camera, Region, visibility_regions
 

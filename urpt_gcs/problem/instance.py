@@ -368,4 +368,3 @@ def require_instance_memory(n_viewpoints: int, n_pairs: int) -> None:
         f"the cover sets of {n_viewpoints} viewpoints ({n_pairs} viewpoint-target pairs)",
         "use fewer --samples, or fewer targets per plan",
     )
-

@@ -9,12 +9,12 @@
 from __future__ import annotations
 
 from urpt_gcs.errors import SettingsError
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers.approx import ApproxSolver
 from urpt_gcs.solvers.base import Solver, SolveSettings, Tour
 from urpt_gcs.solvers.exact import ExactSolver, exact_work
 from urpt_gcs.solvers.heuristic import HeuristicSolver
 from urpt_gcs.solvers.routing import RoutingSolver
-from urpt_gcs.problem.instance import Instance
 
 SOLVERS: dict[str, type[Solver]] = {
     "exact": ExactSolver,

@@ -35,6 +35,7 @@ import numpy as np
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import SettingsError
+from urpt_gcs.problem.instance import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import (
     DISC_PACKING_ALPHA,
     SolveSettings,
@@ -43,7 +44,6 @@ from urpt_gcs.solvers.base import (
     geometric_lower_bound,
     greedy_disjoint,
 )
-from urpt_gcs.problem.instance import Covers, Geometry, Instance
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72

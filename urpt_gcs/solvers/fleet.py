@@ -28,9 +28,9 @@ import numpy.typing as npt
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.flight.safety import FlightModel, split_sorties
-from urpt_gcs.solvers.base import SolveSettings
+from urpt_gcs.problem.flight_time import FlightModel, split_sorties
 from urpt_gcs.problem.instance import Covers, Geometry, Instance
+from urpt_gcs.solvers.base import SolveSettings
 
 # A move must shorten the flights it changes by this much to be kept.
 _EPS_S = 1e-6

@@ -36,6 +36,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from urpt_gcs.errors import SettingsError
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers import _lns_kernels as lns
 from urpt_gcs.solvers import _ls_kernels as ls
 from urpt_gcs.solvers._ls_kernels import EPS, OR_OPT, SYMMETRIC, TWO_OPT
@@ -46,7 +47,6 @@ from urpt_gcs.solvers.clustered import (
     require_partition_memory,
     viewpoint_order,
 )
-from urpt_gcs.problem.instance import Instance
 
 I32 = npt.NDArray[np.int32]
 F64 = npt.NDArray[np.float64]

@@ -16,6 +16,7 @@ import numpy as np
 from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 
 from urpt_gcs.errors import PlanError, SettingsError
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
 from urpt_gcs.solvers.clustered import (
     Clustered,
@@ -24,7 +25,6 @@ from urpt_gcs.solvers.clustered import (
     require_partition_memory,
     viewpoint_order,
 )
-from urpt_gcs.problem.instance import Instance
 
 # Routing needs integer arc costs; scale so that centimetres (or GTSPLIB units) survive.
 _SCALE = 100.0

@@ -1,0 +1,1 @@
+"""The problem without terrain: the GTSP instance, regions on the plane, the flight-time model."""
