@@ -1,11 +1,12 @@
 """Sortie order: reorder the stops for the flight as it is cut into sorties.
 
 The solver minimises one closed tour. When that tour does not fit ``--endurance`` it is cut
-into sorties (:func:`urpt_gcs.problem.flight_time.split_sorties`), and the order that is shortest in one
-piece is seldom the one that cuts best: each sortie flies out from home and back. This stage
-starts from the solver's order and improves it for the objective actually flown, the total
-flight time of the optimal cut of the order (the cut-point DP of ``split_sorties``, compiled
-here), with 2-opt and Or-opt moves between stops near each other and moves of the tour's ends.
+into sorties (:func:`urpt_gcs.problem.flight_time.split_sorties`), and the order that is
+shortest in one piece is seldom the one that cuts best: each sortie flies out from home and
+back. This stage starts from the solver's order and improves it for the objective actually
+flown, the total flight time of the optimal cut of the order (the cut-point DP of
+``split_sorties``, compiled here), with 2-opt and Or-opt moves between stops near each other
+and moves of the tour's ends.
 Which viewpoint serves each target stays the solver's choice.
 
 This is a stop-gap on the way to DESIGN's joint planning of several closed tours: it fixes
