@@ -34,7 +34,8 @@ from affine import Affine
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.bench import rows_csv
-from urpt_gcs.bound.certificate import Certificate, certify, finer_stars, outer_regions
+from urpt_gcs.bound.certificate import Certificate, certify
+from urpt_gcs.bound.geometric import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.files.output import write_all
 from urpt_gcs.flight.refinement import Site, refine_along, refine_tour
 from urpt_gcs.problem.instance import Covers, Instance
@@ -42,9 +43,9 @@ from urpt_gcs.progress import Progress
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import SOLVERS, SolveSettings, Tour, solve
 from urpt_gcs.solvers.approx import paper_path
-from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.solvers.exact import solve_exact
 from urpt_gcs.visibility.cover import build_instance
+from urpt_gcs.visibility.outer import finer_stars, outer_regions
 from urpt_gcs.visibility.regions import Camera, visibility_regions
 
 SIZE = 200.0

@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.pipeline.planner import (
     Plan,
@@ -47,7 +48,7 @@ from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.targets import TargetSet
 from urpt_gcs.solvers import choose, prepare, solve
-from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.fleet import (
     SINGLE_SHARE,
     FleetTours,

@@ -18,13 +18,8 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.arrays import BoolArray, FloatArray
-from urpt_gcs.bound.certificate import (
-    Certificate,
-    bound_time_s,
-    certify,
-    finer_stars,
-    outer_regions,
-)
+from urpt_gcs.bound.certificate import Certificate, bound_time_s, certify
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.flight.margin import robust_tour
 from urpt_gcs.flight.mission import (
@@ -65,8 +60,8 @@ from urpt_gcs.site.terrain import (
     sample_points,
 )
 from urpt_gcs.solvers import Tour, choose, prepare, solve
-from urpt_gcs.solvers.base import geometric_lower_bound
 from urpt_gcs.visibility.cover import build_instance, cover_sets
+from urpt_gcs.visibility.outer import finer_stars, outer_regions
 from urpt_gcs.visibility.regions import Camera, Region, visibility_regions
 
 if TYPE_CHECKING:

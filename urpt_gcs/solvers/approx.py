@@ -34,16 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import DISC_PACKING_ALPHA, geometric_lower_bound, greedy_disjoint
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.problem.instance import Covers, Geometry, Instance
-from urpt_gcs.solvers.base import (
-    DISC_PACKING_ALPHA,
-    SolveSettings,
-    Tour,
-    finish_placed_tour,
-    geometric_lower_bound,
-    greedy_disjoint,
-)
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_placed_tour
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72

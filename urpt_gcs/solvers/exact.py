@@ -33,10 +33,11 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.memory import require_memory
 from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
-from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.clustered import cluster_instance, partition_nodes, viewpoint_order
 
 F64 = npt.NDArray[np.float64]

@@ -266,7 +266,7 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
 
     ``pigeonhole_s``: see :func:`_pigeonhole_s`.
     """
-    from urpt_gcs.solvers.base import greedy_disjoint
+    from urpt_gcs.bound.geometric import greedy_disjoint
 
     if not vehicles:
         raise ValueError("makespan_bound needs at least one vehicle")
