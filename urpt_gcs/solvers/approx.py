@@ -38,6 +38,7 @@ from urpt_gcs.bound.geometric import DISC_PACKING_ALPHA, geometric_lower_bound, 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.problem.instance import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_placed_tour
+from urpt_gcs.solvers.exact import exact_work, quick_tour, search_exact
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72
@@ -78,8 +79,6 @@ def _centre_tour(
 ) -> tuple[list[int], bool]:
     """Shortest closed tour over the chosen centres (and the depot), solved exactly where the
     DP fits its budget and the deadline; the order and whether it is proven shortest."""
-    from urpt_gcs.solvers.exact import exact_work, quick_tour, search_exact
-
     k = len(centres)
     if k == 1:
         return [0], True

@@ -29,9 +29,10 @@ from urpt_gcs.bound.lower_bound import Bound, lower_bound
 from urpt_gcs.errors import PlanError
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.problem.regions import RegionSet
-from urpt_gcs.solvers import disc_tour, solve
+from urpt_gcs.solvers import disc_tour
 from urpt_gcs.solvers.base import SolveSettings, Tour
 from urpt_gcs.solvers.refine import closed_length, refine_touches
+from urpt_gcs.solvers.registry import solve
 
 # Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
 # _MIN_DISC_SAMPLES each).

@@ -39,6 +39,7 @@ from urpt_gcs.memory import require_memory
 from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.clustered import cluster_instance, partition_nodes, viewpoint_order
+from urpt_gcs.solvers.heuristic import SearchSettings, solve_clustered
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -375,8 +376,6 @@ def quick_tour(instance: Instance, deadline: float, seed: int = 0) -> list[int]:
     list of int
         Viewpoints in flight order (after the depot, if there is one).
     """
-    from urpt_gcs.solvers.heuristic import SearchSettings, solve_clustered
-
     greedy = greedy_order(instance)
     nodes = partition_nodes(instance)
     if nodes * nodes * 8.0 > _SEED_MATRIX_BYTES:

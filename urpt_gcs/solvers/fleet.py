@@ -25,12 +25,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.sparse.csgraph import minimum_spanning_tree
 
 from urpt_gcs.arrays import FloatArray, IntArray
+from urpt_gcs.bound.geometric import greedy_disjoint
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.problem.flight_time import FlightModel, split_sorties
 from urpt_gcs.problem.instance import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import SolveSettings
+from urpt_gcs.solvers.registry import choose, prepare, solve
 
 # A move must shorten the flights it changes by this much to be kept.
 _EPS_S = 1e-6
@@ -217,8 +220,6 @@ def tree_bound_m(
     weighs at least the minimum spanning tree of the centres under those shortened (never
     negative) distances. None beyond :data:`TREE_BOUND_MAX_TARGETS` targets.
     """
-    from scipy.sparse.csgraph import minimum_spanning_tree
-
     m = len(targets_xy)
     if m == 0 or m > TREE_BOUND_MAX_TARGETS:
         return 0.0
@@ -266,8 +267,6 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
 
     ``pigeonhole_s``: see :func:`_pigeonhole_s`.
     """
-    from urpt_gcs.bound.geometric import greedy_disjoint
-
     if not vehicles:
         raise ValueError("makespan_bound needs at least one vehicle")
     geometry = [v.instance.geometry for v in vehicles]
@@ -507,8 +506,6 @@ def solve_fleet(
     settings
         The search's time limit and seed.
     """
-    from urpt_gcs.solvers import choose, prepare, solve
-
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
     pieces, naive_times, cut = naive_split(vehicles, single_order, reference)
