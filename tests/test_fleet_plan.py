@@ -24,7 +24,8 @@ from urpt_gcs.problem.instance import Geometry, Instance
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import solve
 from urpt_gcs.solvers.base import SolveSettings
-from urpt_gcs.solvers.fleet import Vehicle, makespan_bound, restrict, solve_fleet
+from urpt_gcs.solvers.fleet import Vehicle, restrict, solve_fleet
+from urpt_gcs.solvers.fleet_bound import makespan_bound
 
 ALTITUDE_M = 40.0
 FOV_DEG = 30.0

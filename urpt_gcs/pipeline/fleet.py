@@ -52,13 +52,12 @@ from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.fleet import (
     SINGLE_SHARE,
     FleetTours,
-    MakespanBound,
     Vehicle,
-    makespan_bound,
     restrict,
     solve_fleet,
     with_home,
 )
+from urpt_gcs.solvers.fleet_bound import MakespanBound, makespan_bound
 from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 
