@@ -40,6 +40,13 @@ from urpt_gcs.problem.instance import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import SolveSettings, Tour, finish_placed_tour
 from urpt_gcs.solvers.exact import exact_work, quick_tour, search_exact
 
+__all__ = [
+    "ApproxBounds",
+    "ApproxSolver",
+    "paper_factor",
+    "paper_path",
+]
+
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72
 # Shares of the time limit for the first tour over the centres, and for the whole path.

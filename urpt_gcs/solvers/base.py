@@ -12,6 +12,15 @@ from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.problem.instance import Instance
 
+__all__ = [
+    "SEED_MAX",
+    "SolveSettings",
+    "Solver",
+    "Tour",
+    "finish_placed_tour",
+    "finish_tour",
+]
+
 SEED_MAX = 2**32 - 1
 
 

@@ -34,6 +34,14 @@ from urpt_gcs.solvers.base import SolveSettings, Tour
 from urpt_gcs.solvers.refine import closed_length, refine_touches
 from urpt_gcs.solvers.registry import solve
 
+__all__ = [
+    "SAMPLES",
+    "ContinuousTour",
+    "solve_regions",
+    "stops",
+    "touches",
+]
+
 # Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
 # _MIN_DISC_SAMPLES each).
 SAMPLES = 24

@@ -41,6 +41,24 @@ from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.clustered import cluster_instance, partition_nodes, viewpoint_order
 from urpt_gcs.solvers.heuristic import SearchSettings, solve_clustered
 
+__all__ = [
+    "F64",
+    "I32",
+    "I64",
+    "MAX_TARGETS",
+    "MEMORY_BUDGET_BYTES",
+    "WORK_BUDGET",
+    "ExactResult",
+    "ExactSolver",
+    "ExactWork",
+    "exact_work",
+    "greedy_order",
+    "quick_tour",
+    "search_exact",
+    "solve_exact",
+    "warm_up",
+]
+
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 I32 = npt.NDArray[np.int32]

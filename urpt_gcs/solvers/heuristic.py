@@ -49,6 +49,15 @@ from urpt_gcs.solvers.clustered import (
     viewpoint_order,
 )
 
+__all__ = [
+    "F64",
+    "I32",
+    "HeuristicSolver",
+    "SearchSettings",
+    "solve_clustered",
+    "warm_up",
+]
+
 I32 = npt.NDArray[np.int32]
 F64 = npt.NDArray[np.float64]
 

@@ -27,6 +27,13 @@ from urpt_gcs.solvers.clustered import (
     viewpoint_order,
 )
 
+__all__ = [
+    "MAX_NODES",
+    "RoutingSolver",
+    "route_clustered",
+    "solve_clustered",
+]
+
 # Routing needs integer arc costs; scale so that centimetres (or GTSPLIB units) survive.
 _SCALE = 100.0
 # Peak memory per pair of partition-form nodes: the float and integer matrices, the Python
