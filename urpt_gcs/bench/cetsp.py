@@ -30,6 +30,20 @@ from urpt_gcs.problem.regions import RegionSet
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import solve_regions
 
+__all__ = [
+    "COLUMNS",
+    "Published",
+    "Row",
+    "format_table",
+    "instance_job",
+    "instance_paths",
+    "read_instance",
+    "read_published",
+    "results_csv",
+    "run_cetsp",
+    "write_results",
+]
+
 if TYPE_CHECKING:
     from distributed import Client
 

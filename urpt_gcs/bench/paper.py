@@ -48,6 +48,37 @@ from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.outer import finer_stars, outer_regions
 from urpt_gcs.visibility.regions import Camera, visibility_regions
 
+__all__ = [
+    "ALTITUDE",
+    "BOUND_GAP",
+    "BOUND_S",
+    "CELL",
+    "FOVS_DEG",
+    "GRID",
+    "PAPER_PROVEN",
+    "REFINE_S",
+    "SAMPLES",
+    "SIZE",
+    "TARGET_COUNTS",
+    "TERRAINS",
+    "Key",
+    "Row",
+    "continuous_gap_pct",
+    "format_tables",
+    "instance_job",
+    "naive_length",
+    "paper_instance",
+    "paper_lower_bound",
+    "random_targets",
+    "read_csv",
+    "refine_pct",
+    "run_instance",
+    "run_paper",
+    "study_grid",
+    "tin_terrain",
+    "write_csv",
+]
+
 SIZE = 200.0
 GRID = 10
 CELL = 0.5

@@ -27,6 +27,14 @@ from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
 from urpt_gcs.solvers import Tour
 
+__all__ = [
+    "NEIGHBOURS",
+    "SEARCH_SHARE",
+    "SEGMENT_MAX",
+    "SortieOrder",
+    "order_sorties",
+]
+
 # The share of --time-limit the search may spend (on top of the solve), and how many of each
 # stop's nearest stops its moves look at.
 SEARCH_SHARE = 0.2
