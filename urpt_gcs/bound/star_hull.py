@@ -138,7 +138,24 @@ def in_star(star: OuterStar, x: float, y: float, slack: float) -> bool:
 
 def shape_hull(shape: Polygon, star: OuterStar, k0: int, count: int) -> tuple[FloatArray, float]:
     """The hull of the polygon's part in sectors ``k0 .. k0 + count - 1`` about the star's
-    centre (empty: no vertex), grown a hair against rounding."""
+    centre, grown a hair against rounding.
+
+    Parameters
+    ----------
+    shape
+        The region as a polygon.
+    star
+        Its outer star: the centre and sector count the pieces are taken about.
+    k0, count
+        The first sector of the piece and how many sectors it spans (modulo the count).
+
+    Returns
+    -------
+    vertices : numpy.ndarray
+        Counter-clockwise hull vertices, ``(k, 2)``; none when the piece is empty.
+    grow_m : float
+        The radius the hull is grown by.
+    """
     n = star.reach_m.size
     part = shape
     if count < n:
