@@ -34,7 +34,8 @@ from urpt_gcs.pipeline.settings import (  # noqa: E402
 )
 from urpt_gcs.solvers import choose, prepare, solve  # noqa: E402
 from urpt_gcs.solvers.base import SolveSettings  # noqa: E402
-from urpt_gcs.solvers.fleet import SINGLE_SHARE, makespan_bound, solve_fleet  # noqa: E402
+from urpt_gcs.solvers.fleet import SINGLE_SHARE, solve_fleet  # noqa: E402
+from urpt_gcs.solvers.fleet_bound import makespan_bound  # noqa: E402
 
 
 def _minutes(seconds: float) -> str:

@@ -30,10 +30,10 @@ from urpt_gcs.bench.scale import ScaleSite, make_scale_site
 from urpt_gcs.errors import UrptError
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers import SolveSettings, Tour, solve
 from urpt_gcs.solvers.clustered import partition_nodes
 from urpt_gcs.solvers.routing import MAX_NODES
-from urpt_gcs.visibility.cover import Instance
 
 
 def _checked(instance: Instance, tour: Tour) -> Tour:

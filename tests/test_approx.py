@@ -78,7 +78,7 @@ def test_lower_bound_optimum_heuristic_order(seed: int) -> None:
 def test_disjoint_discs_are_the_greedy_choice_pairwise_apart_and_maximal(seed: int) -> None:
     """The discs the packing bound counts are the ones greedy in index order takes (written
     out pair by pair here), no two within twice the radius, and no other disc fits."""
-    from urpt_gcs.solvers.base import greedy_disjoint
+    from urpt_gcs.bound.geometric import greedy_disjoint
 
     rng = np.random.default_rng(seed)
     pts = rng.uniform(0.0, 500.0, (600, 2))

@@ -14,7 +14,7 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.bench.cetsp import read_instance
 from urpt_gcs.bound.lower_bound import lower_bound, skipped_regions, start_pieces
-from urpt_gcs.solvers.regions import RegionSet
+from urpt_gcs.problem.regions import RegionSet
 
 
 def _disc_grid(x: float, y: float, r: float, k: int) -> np.ndarray:
@@ -150,7 +150,7 @@ def test_a_search_stopped_early_still_meets_every_region() -> None:
     """Stopped after a few nodes, before any polyline met every disc, the search dives for
     one: the polyline it returns passes within every disc (measured by shapely)."""
     from urpt_gcs.bound.order_bound import order_bound
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(7)
     n = 30
@@ -209,7 +209,8 @@ def test_fixed_order_certificate_against_scipy() -> None:
     that order, and close to it."""
     from scipy.optimize import minimize
 
-    from urpt_gcs.bound.order_bound import _Sets, solve_order
+    from urpt_gcs.bound._order_kernels import solve_order
+    from urpt_gcs.bound.order_bound import _Sets
 
     rng = np.random.default_rng(5)
     for _ in range(5):
@@ -266,8 +267,8 @@ def test_bound_closes_on_proven_cetsp_optima(name: str) -> None:
 def test_star_piece_hulls_hold_their_star(sectors: int, run: int) -> None:
     # ``run`` sectors in a row share a reach (a finely walked star repeats each coarse
     # sector's reach, and the cone caps many sectors at one reach), some of them none.
-    from urpt_gcs.bound.order_bound import star_hull
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.bound.star_hull import star_hull
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(sectors)
     reach = np.repeat(rng.uniform(0.5, 10.0, sectors // run), run)
@@ -291,8 +292,8 @@ def test_a_finely_walked_star_has_no_more_hull_vertices_than_the_coarse_one() ->
     """A star whose sectors are each split in 8 with the same reach is the same set: its
     hull keeps the coarse star's vertex count (the search's node solves take time in
     proportion to it)."""
-    from urpt_gcs.bound.order_bound import star_hull
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.bound.star_hull import star_hull
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(3)
     coarse = rng.uniform(5.0, 10.0, 720)
@@ -308,7 +309,7 @@ def test_the_search_stops_once_the_bound_meets_its_shortest_polyline() -> None:
     gap target of the shortest polyline it met that meets every star: the bound can rise no
     further (it is the least over those polylines and the open nodes)."""
     from urpt_gcs.bound.order_bound import order_bound
-    from urpt_gcs.solvers.regions import OuterStar
+    from urpt_gcs.problem.regions import OuterStar
 
     rng = np.random.default_rng(12)
     stars: list[OuterStar | None] = []
@@ -330,7 +331,7 @@ def test_fewer_vertices_holds_the_polygon_and_moves_it_out_by_at_most_the_tolera
     """A convex polygon of many short edges (a finely walked star's hull) simplified: it
     holds every point of the original, lies within the tolerance of it, and has fewer
     vertices."""
-    from urpt_gcs.bound.order_bound import _hull, fewer_vertices
+    from urpt_gcs.bound.star_hull import _hull, fewer_vertices
 
     rng = np.random.default_rng(seed)
     t = np.sort(rng.uniform(0, 2 * np.pi, 3000))

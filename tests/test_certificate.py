@@ -22,13 +22,13 @@ from conftest import WriteDem
 from independent import check_mission
 from scipy.ndimage import map_coordinates
 
-from urpt_gcs.bound.certificate import outer_regions
 from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.files.products import write_products
 from urpt_gcs.files.report import flight_quality, summary_text
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.solvers import SolveSettings
+from urpt_gcs.visibility.outer import outer_regions
 
 ORIGIN = (500_000.0, 5_200_000.0)
 RES = 0.5
@@ -332,8 +332,9 @@ def test_whole_stars_walked_finer_bring_the_bound_within_half_a_percent() -> Non
     force). Walking the stars the relaxed tour meets again whole, sectors split in two a
     round, brings it within 0.5 % (walking only the sectors met, it stayed above 1 % after
     30 s), and never above the tour."""
-    from urpt_gcs.bound.certificate import certify, finer_stars
+    from urpt_gcs.bound.certificate import certify
     from urpt_gcs.flight.refinement import refine_along
+    from urpt_gcs.visibility.outer import finer_stars
 
     terrain, targets, ground, camera, regions, ratio, site, like = _paper_stars(8, 8)
     plain = certify(regions, 1e9, 5.0)
@@ -358,8 +359,9 @@ def test_stars_tightened_where_the_relaxed_tour_meets_them() -> None:
     reaches the cone's edge where nothing is seen. Walking the stars it meets again, finer,
     raises the bound, which stays below a real tour (read off the polyline, every stop seen
     by brute force)."""
-    from urpt_gcs.bound.certificate import certify, finer_stars
+    from urpt_gcs.bound.certificate import certify
     from urpt_gcs.flight.refinement import refine_along
+    from urpt_gcs.visibility.outer import finer_stars
 
     terrain, targets, ground, camera, regions, ratio, site, like = _paper_stars(2, 6)
     # A real tour's length lets the search finish; the stars are tightened in the time left.

@@ -337,9 +337,9 @@ def test_the_display_ticks_every_second_through_a_long_stage() -> None:
 
 
 def test_the_display_ticks_while_ortools_holds_the_interpreter() -> None:
+    from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
     from urpt_gcs.progress import StageProgress
     from urpt_gcs.solvers import SolveSettings, solve
-    from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
 
     rng = np.random.default_rng(0)
     points = rng.uniform(0, 1000, (300, 2))

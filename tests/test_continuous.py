@@ -13,11 +13,11 @@ from shapely.geometry import LineString, Point
 
 from urpt_gcs.bench.cetsp import COLUMNS, read_instance, read_published
 from urpt_gcs.cli import main
+from urpt_gcs.problem.regions import RegionSet
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import _from_relaxed, solve_regions
 from urpt_gcs.solvers.disc_tour import exact_positions, improve
 from urpt_gcs.solvers.refine import best_on_disc, closed_length, refine_touches
-from urpt_gcs.solvers.regions import RegionSet
 
 
 def test_best_point_on_a_disc_matches_a_dense_search() -> None:
@@ -257,7 +257,8 @@ def test_order_search_touches_every_disc_and_never_lengthens() -> None:
 def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
     # The kick loop also runs on a tour of some of the discs (the others taken out, their
     # position -1): it must neither put one of those in nor lose one of its own.
-    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, _among, _kicks, path_length
+    from urpt_gcs.solvers._disc_kicks import _kicks
+    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, _among, path_length
 
     rng = np.random.default_rng(14)
     n = 300
@@ -288,7 +289,8 @@ def test_kicks_on_the_stops_alone_keep_to_them_and_never_lengthen() -> None:
 def test_a_drifting_search_keeps_tours_within_its_drift_and_returns_the_shortest() -> None:
     # With a drift the kept tour may be longer than the shortest met, by that factor at
     # most; the shortest is the one returned, and it still touches every disc.
-    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, _kicks, neighbours, path_length
+    from urpt_gcs.solvers._disc_kicks import _kicks
+    from urpt_gcs.solvers.disc_tour import RUIN_NEIGHBOURS, neighbours, path_length
 
     rng = np.random.default_rng(21)
     n = 250
@@ -611,7 +613,7 @@ def test_insertion_tours_hold_every_disc_inside_and_differ() -> None:
 def test_cheapest_insertion_matches_a_scan_of_every_leg() -> None:
     # The insertion skips legs by a lower bound of their cost and takes the first leg that
     # crosses the disc: its cost must still be the least over every leg, found by brute force.
-    from urpt_gcs.solvers.disc_tour import _insert_cheapest
+    from urpt_gcs.solvers._disc_kicks import _insert_cheapest
 
     rng = np.random.default_rng(11)
     for trial in range(80):
@@ -663,7 +665,7 @@ def test_best_point_on_a_disc_from_ends_beside_its_rim() -> None:
 
 def test_the_insertion_floor_never_exceeds_the_insertion_cost() -> None:
     # Moves are skipped on this floor: above the real cost it would skip improving moves.
-    from urpt_gcs.solvers.disc_tour import _insert_cost, _insert_floor
+    from urpt_gcs.solvers._disc_moves import _insert_cost, _insert_floor
 
     rng = np.random.default_rng(13)
     for trial in range(400):
@@ -680,7 +682,8 @@ def test_moving_the_depot_puts_it_on_one_of_the_cheapest_far_legs() -> None:
     # The closed tour is the same cycle of stops, the depot now on a leg at least ``away``
     # stops from its old one, and that leg is among the cheapest such (checked against
     # every rotation's length, computed here).
-    from urpt_gcs.solvers.disc_tour import _DEPOT_CHOICES, _move_depot, path_length
+    from urpt_gcs.solvers._disc_kicks import _DEPOT_CHOICES, _move_depot
+    from urpt_gcs.solvers.disc_tour import path_length
 
     rng = np.random.default_rng(8)
     n, away = 40, 6

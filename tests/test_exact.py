@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
 from urpt_gcs.solvers import SolveSettings, choose, solve
 from urpt_gcs.solvers.exact import ExactSolver, exact_work, greedy_order, search_exact
-from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
 
 
 def _random_instance(

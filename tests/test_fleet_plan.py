@@ -18,13 +18,14 @@ from independent import check_mission, load_raster, read_waypoints_file
 from test_plan import _valid_targets
 
 from urpt_gcs.cli import main
-from urpt_gcs.flight.safety import FlightModel
 from urpt_gcs.pipeline.fleet import Track, _pair_closest, closest, timing_slack_s
+from urpt_gcs.problem.flight_time import FlightModel
+from urpt_gcs.problem.instance import Geometry, Instance
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import solve
 from urpt_gcs.solvers.base import SolveSettings
-from urpt_gcs.solvers.fleet import Vehicle, makespan_bound, restrict, solve_fleet
-from urpt_gcs.visibility.cover import Geometry, Instance
+from urpt_gcs.solvers.fleet import Vehicle, restrict, solve_fleet
+from urpt_gcs.solvers.fleet_bound import makespan_bound
 
 ALTITUDE_M = 40.0
 FOV_DEG = 30.0

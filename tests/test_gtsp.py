@@ -1,5 +1,5 @@
-"""Tests for urpt_gcs.visibility.cover: sparse cover sets, the two distance forms, the memory
-estimate."""
+"""Tests for urpt_gcs.problem.instance and urpt_gcs.visibility.cover: sparse cover sets, the two
+distance forms, the memory estimate, the pairs seen on the terrain."""
 
 from __future__ import annotations
 
@@ -9,15 +9,9 @@ import pytest
 from affine import Affine
 
 from urpt_gcs.memory import MEMORY_BUDGET_ENV, MemoryBudgetError
+from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix, require_instance_memory
 from urpt_gcs.site.terrain import Terrain
-from urpt_gcs.visibility.cover import (
-    Covers,
-    Instance,
-    cover_pairs,
-    cover_sets,
-    euclidean_matrix,
-    require_instance_memory,
-)
+from urpt_gcs.visibility.cover import cover_pairs, cover_sets
 from urpt_gcs.visibility.regions import Camera
 
 

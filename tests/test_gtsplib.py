@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from urpt_gcs.errors import OutputError, SettingsError
 from urpt_gcs.files.formats.gtsplib import export_gtsplib, read_gtsplib, read_tour, write_gtsplib
-from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
+from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
 
 TOURS = sorted((GTSPLIB / "tours").glob("*.tour"))
 needs_gtsplib = needs_shared(GTSPLIB)

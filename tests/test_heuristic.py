@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from conftest import GTSPLIB, needs_shared
 
+from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
 from urpt_gcs.solvers.clustered import cluster_instance
 from urpt_gcs.solvers.heuristic import HeuristicSolver, SearchSettings, solve_clustered, warm_up
-from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
 
 SETTINGS = SolveSettings(time_limit_s=10.0, seed=0)
 

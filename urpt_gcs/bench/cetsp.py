@@ -26,9 +26,23 @@ import numpy as np
 from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.files.output import write_all
+from urpt_gcs.problem.regions import RegionSet
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.continuous import solve_regions
-from urpt_gcs.solvers.regions import RegionSet
+
+__all__ = [
+    "COLUMNS",
+    "Published",
+    "Row",
+    "format_table",
+    "instance_job",
+    "instance_paths",
+    "read_instance",
+    "read_published",
+    "results_csv",
+    "run_cetsp",
+    "write_results",
+]
 
 if TYPE_CHECKING:
     from distributed import Client

@@ -24,10 +24,10 @@ from urpt_gcs.bench import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.files.formats.gtsplib import BENCH_FLAG, read_gtsplib
 from urpt_gcs.files.output import write_all
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.inputs import GTSPLIB_MAX_BYTES, read_capped
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve
-from urpt_gcs.visibility.cover import Instance
 
 __all__ = ["Row", "bench_solvers", "format_table", "results_csv", "run_gtsplib", "tour_cost"]
 

@@ -34,17 +34,50 @@ from affine import Affine
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.batch.cluster import map_jobs
 from urpt_gcs.bench import rows_csv
-from urpt_gcs.bound.certificate import Certificate, certify, finer_stars, outer_regions
+from urpt_gcs.bound.certificate import Certificate, certify
+from urpt_gcs.bound.geometric import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.files.output import write_all
 from urpt_gcs.flight.refinement import Site, refine_along, refine_tour
+from urpt_gcs.problem.instance import Covers, Instance
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import SOLVERS, SolveSettings, Tour, solve
 from urpt_gcs.solvers.approx import paper_path
-from urpt_gcs.solvers.base import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.solvers.exact import solve_exact
-from urpt_gcs.visibility.cover import Covers, Instance, build_instance
+from urpt_gcs.visibility.cover import build_instance
+from urpt_gcs.visibility.outer import finer_stars, outer_regions
 from urpt_gcs.visibility.regions import Camera, visibility_regions
+
+__all__ = [
+    "ALTITUDE",
+    "BOUND_GAP",
+    "BOUND_S",
+    "CELL",
+    "FOVS_DEG",
+    "GRID",
+    "PAPER_PROVEN",
+    "REFINE_S",
+    "SAMPLES",
+    "SIZE",
+    "TARGET_COUNTS",
+    "TERRAINS",
+    "Key",
+    "Row",
+    "continuous_gap_pct",
+    "format_tables",
+    "instance_job",
+    "naive_length",
+    "paper_instance",
+    "paper_lower_bound",
+    "random_targets",
+    "read_csv",
+    "refine_pct",
+    "run_instance",
+    "run_paper",
+    "study_grid",
+    "tin_terrain",
+    "write_csv",
+]
 
 SIZE = 200.0
 GRID = 10

@@ -1,58 +1,41 @@
 """Certificate: how far, at most, a flight is from the shortest one any planner could find.
 
-Every point of the flight plane that sees a target lies in the target's outer star
-(:func:`urpt_gcs.visibility.stars.star_reach`, exact on the DEM's bilinear surface and the
-camera).
-A closed flight from home that photographs every target enters every outer star, so the
-certified lower bound of :mod:`urpt_gcs.bound.lower_bound` over those stars bounds the length of
-every such flight at this altitude with this camera -- not only of tours over the planner's
-candidate viewpoints.
+Every point of the flight plane that sees a target lies in the target's outer star (walked
+on the DEM by the visibility package). A closed flight from home that photographs every
+target enters every outer star, so the certified lower bound of
+:mod:`urpt_gcs.bound.lower_bound` over those stars bounds the length of every such flight at
+this altitude with this camera -- not only of tours over the planner's candidate viewpoints.
+:func:`certify` takes the stars as regions and, optionally, what tightens them.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
-from scipy.spatial import cKDTree
-from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.lower_bound import lower_bound
-from urpt_gcs.flight.refinement import points_along
-from urpt_gcs.site.terrain import Terrain
-from urpt_gcs.solvers.regions import OuterStar, RegionSet
-from urpt_gcs.visibility.regions import Camera
-from urpt_gcs.visibility.stars import FINER_SPLIT, STAR_SECTORS, finer_wedges, star_reach
+from urpt_gcs.problem.regions import RegionSet
+
+__all__ = [
+    "BOUND_SHARE",
+    "BOUND_TIME_S",
+    "PROVEN_GAP",
+    "Certificate",
+    "Tighten",
+    "bound_time_s",
+    "certify",
+]
 
 # Below this gap a tour is called optimal: its length is within it of the certified bound.
 PROVEN_GAP = 1e-4
 # Seconds the bound may spend by default, and its share of the solver's time limit.
 BOUND_TIME_S = 5.0
 BOUND_SHARE = 0.5
-# Regions the bound is computed over at most: beyond, the regions farthest apart (every
-# flight enters those too), since the relaxation's first round grows with their square.
-BOUND_MAX_REGIONS = 150
-# Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
-_FINE_UP_TO = 24
-_LEAST_SECTORS = 180
-# Tightening the stars where the relaxed tour meets them: a star it passes within this share
-# of a sector's reach from the edge is walked again whole, every sector split in two, up to
-# FINER_SPLIT times its first sectors; the stars closest to their edge first, as many as
-# fit half the time left.
-_NEAR_EDGE = 0.2
-# Seconds a wedge's walk takes per band of half a cell (measured on the paper's terrains).
-_BAND_S = 4e-7
-# A relaxed tour meets a star to within this share of its reach (the bound's tolerance).
-_TOUCH = 1e-3
-# ... and this share of a sector's width from its edge counts in the neighbour too.
-_TOUCH_EDGE = 0.05
-
 # Tighter regions where a relaxed tour meets them, within a time budget (None: nothing left
 # to tighten).
 Tighten = Callable[[RegionSet, FloatArray, float], "RegionSet | None"]
@@ -93,79 +76,6 @@ def bound_time_s(time_limit_s: float) -> float:
     return min(BOUND_TIME_S, BOUND_SHARE * time_limit_s)
 
 
-def spread_targets(
-    targets_xy: FloatArray, radius_m: FloatArray, depot_xy: tuple[float, float] | None, k: int
-) -> list[int]:
-    """``k`` targets whose discs of ``radius_m`` lie far apart (farthest-point order), from
-    the one farthest from the depot (or from target 0); all of them when there are no more."""
-    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
-    r = np.asarray(radius_m, dtype=np.float64)
-    if len(xy) <= k:
-        return list(range(len(xy)))
-    origin = xy[0] if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
-    gap = np.hypot(*(xy - origin).T) - r
-    chosen: list[int] = []
-    for _ in range(k):
-        j = int(np.argmax(gap))
-        chosen.append(j)
-        gap = np.minimum(gap, np.hypot(*(xy - xy[j]).T) - r - r[j])
-        gap[chosen] = -np.inf
-    return sorted(chosen)
-
-
-def star_sectors(regions: int) -> int:
-    """Sectors per outer star for a bound over ``regions`` regions."""
-    if regions <= _FINE_UP_TO:
-        return STAR_SECTORS
-    return max(_LEAST_SECTORS, STAR_SECTORS * _FINE_UP_TO // regions // 8 * 8)
-
-
-def outer_regions(
-    terrain: Terrain,
-    targets_xy: FloatArray,
-    ground_m: FloatArray,
-    camera: Camera,
-    depot_xy: tuple[float, float] | None,
-    workers: int | None = 1,
-    max_regions: int = BOUND_MAX_REGIONS,
-    hold_m: float = 0.0,
-) -> tuple[RegionSet, float]:
-    """The targets' outer stars as regions to enter (of at most ``max_regions`` targets far
-    apart), home as the depot, and the ratio of the stars' area to what is certainly seen.
-
-    With ``hold_m`` > 0 the regions are where a stop sees its target from anywhere within
-    ``hold_m`` of it (the plan's position tolerance): such a stop ``p`` at angle ``t`` from the
-    star's centre has ``p + hold_m (cos t, sin t)`` seeing too, so ``|p - c| + hold_m`` is within
-    the sector's reach, and every reach shrinks by ``hold_m``.
-
-    A target whose star holds home is marked as holding the depot (the bound leaves it out):
-    a flight from home may see it without ever crossing its region's edge.
-    """
-    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
-    ground = np.asarray(ground_m, dtype=np.float64)
-    keep = spread_targets(xy, camera.cone_radius_m(ground), depot_xy, max_regions)
-    xy, ground = xy[keep], ground[keep]
-    sectors = star_sectors(len(keep))
-    outer, inner = star_reach(terrain, xy, ground, camera, sectors, workers)
-    if hold_m > 0.0:
-        outer = np.maximum(outer - hold_m, 0.0)
-        inner = np.minimum(np.maximum(inner - hold_m, 0.0), outer)
-    stars = tuple(
-        OuterStar((float(x), float(y)), outer[i], inner[i]) for i, (x, y) in enumerate(xy.tolist())
-    )
-    inside = None if depot_xy is None else tuple(_holds(s, depot_xy) for s in stars)
-    regions = RegionSet(
-        polygons=tuple(_star_polygon(s) for s in stars),
-        depot_xy=depot_xy,
-        outer=stars,
-        depot_inside=inside,
-        name="outer visibility stars",
-    )
-    seen = float(np.sum(inner**2))
-    ratio = float(np.sum(outer**2)) / seen if seen > 0.0 else math.inf
-    return regions, ratio
-
-
 def certify(
     regions: RegionSet,
     length_m: float,
@@ -179,9 +89,9 @@ def certify(
 
     ``also_m`` is another valid bound of the same problem (the depot's and the disc-packing
     bounds); the larger of the two is kept, never more than the flight itself. With
-    ``tighten`` (:func:`finer_stars`), while time is left and the flight is more than
-    ``enough`` (a share) longer than the bound, the regions are tightened where the relaxed
-    tour meets them and bounded again.
+    ``tighten`` (such as the visibility package's ``finer_stars``), while time is left and
+    the flight is more than ``enough`` (a share) longer than the bound, the regions are
+    tightened where the relaxed tour meets them and bounded again.
     """
     started = time.perf_counter()
     # The first bound has all the time: the stars are tightened with what it leaves (a
@@ -214,131 +124,3 @@ def certify(
     return Certificate(
         min(value, length_m), method, time.perf_counter() - started, sectors, area_ratio, poly
     )
-
-
-def finer_stars(
-    terrain: Terrain, camera: Camera, workers: int | None = 1, hold_m: float = 0.0
-) -> Tighten:
-    """What tightens the outer stars of :func:`outer_regions` (made with the same terrain,
-    camera and ``hold_m``) where a relaxed tour meets them: each star it passes near the
-    edge (within :data:`_NEAR_EDGE` of a sector's reach, and farther out than the star is
-    surely seen) is walked again whole by :func:`urpt_gcs.visibility.stars.finer_wedges`, every
-    sector split in two, until it has :data:`FINER_SPLIT` times its first sectors. The stars
-    still hold every point that sees their targets.
-
-    Whole stars, not the sectors met: a star walked finer only there keeps its coarse
-    sectors' corners beside them, the next relaxed tour moves onto one, and the order search
-    splits its pieces around every such corner (on paper terrain 8, 8 targets at 40 deg, it
-    closed 125 000 nodes to reach 80.58 m; the same stars walked whole, 11 000 to 81.19 m)."""
-    first: dict[tuple[float, float], int] = {}
-    step = terrain.cell_m / 2.0
-
-    def tighten(regions: RegionSet, poly_xy: FloatArray, budget_s: float) -> RegionSet | None:
-        stars = regions.outer
-        if not stars:
-            return None
-        poly = np.asarray(poly_xy, dtype=np.float64).reshape(-1, 2)
-        samples = points_along(poly, step)
-        tree = cKDTree(samples)
-        asked: list[tuple[float, int]] = []
-        for i, star in enumerate(stars):
-            n = star.reach_m.size
-            if n >= first.setdefault(star.center_xy, n) * FINER_SPLIT:
-                continue
-            c = np.asarray(star.center_xy)
-            far = float(star.reach_m.max()) / math.cos(math.pi / n) * (1.0 + _TOUCH)
-            near = tree.query_ball_point(c, far)
-            if not near:
-                continue
-            rel = samples[near] - c
-            dist = np.hypot(*rel.T)
-            f = np.arctan2(rel[:, 1], rel[:, 0]) % (2.0 * math.pi) / (2.0 * math.pi) * n
-            j = np.minimum(np.floor(f).astype(np.int64), n - 1)
-            least = np.full(n, np.inf)
-            np.minimum.at(least, j, dist)
-            # A point on the edge between two sectors lies in both (the star's polygon meets
-            # a sector's neighbour there at the sector's reach).
-            low, high = f - j < _TOUCH_EDGE, f - j > 1.0 - _TOUCH_EDGE
-            np.minimum.at(least, (j[low] - 1) % n, dist[low])
-            np.minimum.at(least, (j[high] + 1) % n, dist[high])
-            inner = star.inner_m if star.inner_m is not None else np.zeros(n)
-            reach = star.reach_m
-            pick = (
-                (least <= reach / math.cos(math.pi / n) * (1.0 + _TOUCH))
-                & (least >= (1.0 - _NEAR_EDGE) * reach)
-                & (least > inner)
-            )
-            if pick.any():
-                asked.append((float(np.min(reach[pick] - least[pick])), i))
-        if not asked:
-            return None
-        chosen: list[int] = []
-        cost = 0.0
-        for _, i in sorted(asked):
-            walk = 2.0 * float(stars[i].reach_m.sum()) / step * _BAND_S
-            if chosen and cost + walk > budget_s:
-                break
-            chosen.append(i)
-            cost += walk
-        count = np.array([stars[i].reach_m.size for i in chosen])
-        which = np.repeat(chosen, count)
-        sector = np.concatenate([np.arange(k) for k in count.tolist()])
-        xy = np.array([stars[i].center_xy for i in chosen])[
-            np.repeat(np.arange(len(chosen)), count)
-        ]
-        ground = terrain.sample(xy[:, 0], xy[:, 1])
-        got = finer_wedges(
-            terrain, xy, ground, camera, np.repeat(count, count), sector, workers, split=2, bands=1
-        )
-        if hold_m > 0.0:
-            got = np.maximum(got - hold_m, 0.0)
-        new = list(stars)
-        for i in chosen:
-            new[i] = _halved(stars[i], got[which == i])
-        stars_t = tuple(new)
-        inside = (
-            None
-            if regions.depot_xy is None
-            else tuple(_holds(s, regions.depot_xy) for s in stars_t)
-        )
-        return dataclasses.replace(
-            regions,
-            polygons=tuple(_star_polygon(s) for s in stars_t),
-            outer=stars_t,
-            depot_inside=inside,
-        )
-
-    return tighten
-
-
-def _halved(star: OuterStar, wedges: FloatArray) -> OuterStar:
-    """The star with every sector split in two, each half's reach the least of the sector's
-    and its wedge's (``wedges``: a row of two per sector)."""
-    reach = np.minimum(np.repeat(star.reach_m, 2), wedges.ravel())
-    inner = None if star.inner_m is None else np.minimum(np.repeat(star.inner_m, 2), reach)
-    return OuterStar(star.center_xy, reach, inner)
-
-
-def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:
-    """Whether the point may lie in the star: within the reach of its sector or of either
-    neighbour (a point on an edge between two sectors belongs to both)."""
-    dx, dy = xy[0] - star.center_xy[0], xy[1] - star.center_xy[1]
-    n = star.reach_m.size
-    k = math.floor(math.atan2(dy, dx) % (2.0 * math.pi) / (2.0 * math.pi) * n) % n
-    reach = max(float(star.reach_m[j % n]) for j in (k - 1, k, k + 1))
-    return math.hypot(dx, dy) <= reach * (1.0 + 1e-9) + 1e-9
-
-
-def _star_polygon(star: OuterStar) -> Polygon:
-    """A polygon holding the star: each sector's arc replaced by the tangents' corners."""
-    n = star.reach_m.size
-    edges = 2.0 * math.pi * np.arange(n + 1) / n
-    r = np.maximum(star.reach_m, 1e-6) / math.cos(math.pi / n)
-    t = np.column_stack([edges[:-1], edges[1:]]).ravel()
-    rr = np.repeat(r, 2)
-    cx, cy = star.center_xy
-    poly = Polygon(np.column_stack([cx + rr * np.cos(t), cy + rr * np.sin(t)]))
-    if poly.is_valid and poly.area > 0.0:
-        return poly
-    disc: Polygon = shapely.Point(cx, cy).buffer(float(r.max()))
-    return disc

@@ -43,7 +43,23 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.order_bound import order_bound
-from urpt_gcs.solvers.regions import OuterStar, RegionSet
+from urpt_gcs.problem.regions import OuterStar, RegionSet
+
+__all__ = [
+    "EXACT_MAX_REGIONS",
+    "Bound",
+    "Pieces",
+    "Row",
+    "exact_relaxed",
+    "lower_bound",
+    "piece_costs",
+    "skipped_regions",
+    "split",
+    "spread_subset",
+    "start_pieces",
+    "subset_bound",
+    "touches_boundary",
+]
 
 I64 = npt.NDArray[np.int64]
 

@@ -36,6 +36,7 @@ from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.flight.margin import RING_POINTS
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
+from urpt_gcs.visibility.outer import points_along
 from urpt_gcs.visibility.regions import Camera, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
 
@@ -352,18 +353,6 @@ _NEAREST = 1024
 _TOWARDS_STEPS = 40
 
 
-def points_along(poly: FloatArray, spacing_m: float) -> FloatArray:
-    """Points along the closed polyline, in order, no more than ``spacing_m`` apart, every
-    vertex among them."""
-    ends = np.roll(poly, -1, axis=0)
-    pieces = []
-    for a, b in zip(poly, ends, strict=True):
-        count = max(1, math.ceil(math.hypot(*(b - a)) / max(spacing_m, 1e-9)))
-        f = np.arange(count)[:, None] / count
-        pieces.append(a + f * (b - a))
-    return np.vstack(pieces)
-
-
 def _towards_seen(site: Site, start: FloatArray, target: int) -> FloatArray:
     """For each start, the point of its way to the target's nadir nearest it found to see
     the target (halving: along an azimuth what is seen is an interval from the nadir)."""
@@ -547,7 +536,6 @@ def written_grid(
 __all__ = [
     "Refinement",
     "Site",
-    "points_along",
     "refine_along",
     "refine_tour",
     "tour_along",

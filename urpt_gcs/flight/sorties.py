@@ -1,11 +1,12 @@
 """Sortie order: reorder the stops for the flight as it is cut into sorties.
 
 The solver minimises one closed tour. When that tour does not fit ``--endurance`` it is cut
-into sorties (:func:`urpt_gcs.flight.safety.split_sorties`), and the order that is shortest in one
-piece is seldom the one that cuts best: each sortie flies out from home and back. This stage
-starts from the solver's order and improves it for the objective actually flown, the total
-flight time of the optimal cut of the order (the cut-point DP of ``split_sorties``, compiled
-here), with 2-opt and Or-opt moves between stops near each other and moves of the tour's ends.
+into sorties (:func:`urpt_gcs.problem.flight_time.split_sorties`), and the order that is
+shortest in one piece is seldom the one that cuts best: each sortie flies out from home and
+back. This stage starts from the solver's order and improves it for the objective actually
+flown, the total flight time of the optimal cut of the order (the cut-point DP of
+``split_sorties``, compiled here), with 2-opt and Or-opt moves between stops near each other
+and moves of the tour's ends.
 Which viewpoint serves each target stays the solver's choice.
 
 This is a stop-gap on the way to DESIGN's joint planning of several closed tours: it fixes
@@ -23,8 +24,16 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import FloatArray, IntArray
-from urpt_gcs.flight.safety import FlightModel, Sortie, split_sorties
+from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
 from urpt_gcs.solvers import Tour
+
+__all__ = [
+    "NEIGHBOURS",
+    "SEARCH_SHARE",
+    "SEGMENT_MAX",
+    "SortieOrder",
+    "order_sorties",
+]
 
 # The share of --time-limit the search may spend (on top of the solve), and how many of each
 # stop's nearest stops its moves look at.
@@ -76,7 +85,7 @@ class SortieOrder:
 @njit(cache=True)
 def _cut_time(out_s, back_s, cum_s, ends_s, endurance_s, best, first):  # type: ignore[no-untyped-def]
     """Least total flight time of sorties over stops in this order, each within
-    ``endurance_s`` (as :func:`urpt_gcs.flight.safety.split_sorties`); ``best[j]`` is that of
+    ``endurance_s`` (as :func:`urpt_gcs.problem.flight_time.split_sorties`); ``best[j]`` is that of
     the first ``j`` stops and is reused up to ``first``, where the order last changed."""
     k = out_s.shape[0]
     for j in range(first + 1, k + 1):
@@ -186,7 +195,7 @@ def order_sorties(
     tour
         The solver's tour; its stops are reordered, never changed.
     home_xy, altitude_rel_m, model, endurance_s, names
-        As for :func:`urpt_gcs.flight.safety.split_sorties`.
+        As for :func:`urpt_gcs.problem.flight_time.split_sorties`.
     budget_s
         Wall time the search may spend.
     seed

@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.pipeline.planner import (
     Plan,
@@ -43,21 +44,21 @@ from urpt_gcs.pipeline.planner import (
     flight_model,
 )
 from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, SeparationMode, VehicleSpec
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.targets import TargetSet
 from urpt_gcs.solvers import choose, prepare, solve
-from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.fleet import (
     SINGLE_SHARE,
     FleetTours,
-    MakespanBound,
     Vehicle,
-    makespan_bound,
     restrict,
     solve_fleet,
     with_home,
 )
-from urpt_gcs.visibility.cover import Instance, build_instance
+from urpt_gcs.solvers.fleet_bound import MakespanBound, makespan_bound
+from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 
 # Start delays are searched in whole steps of this, up to the undelayed makespan.

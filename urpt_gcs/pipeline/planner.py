@@ -18,13 +18,8 @@ import numpy as np
 import pyproj
 
 from urpt_gcs.arrays import BoolArray, FloatArray
-from urpt_gcs.bound.certificate import (
-    Certificate,
-    bound_time_s,
-    certify,
-    finer_stars,
-    outer_regions,
-)
+from urpt_gcs.bound.certificate import Certificate, bound_time_s, certify
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError, TargetsError
 from urpt_gcs.flight.margin import robust_tour
 from urpt_gcs.flight.mission import (
@@ -47,6 +42,7 @@ from urpt_gcs.flight.safety import (
 from urpt_gcs.flight.sorties import SEARCH_SHARE, SortieOrder, order_sorties
 from urpt_gcs.memory import require_memory
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.problem.instance import Instance, instance_bytes
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.dem import WGS84, DemInfo, check_elevations, open_dem, planning_crs
@@ -54,8 +50,8 @@ from urpt_gcs.site.reading import BlockCache, area_max, fill_along, read_mosaic,
 from urpt_gcs.site.targets import SWAP_FIX, Target, TargetSet, read_targets
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour, choose, prepare, solve
-from urpt_gcs.solvers.base import geometric_lower_bound
-from urpt_gcs.visibility.cover import Instance, build_instance, cover_sets, instance_bytes
+from urpt_gcs.visibility.cover import build_instance, cover_sets
+from urpt_gcs.visibility.outer import finer_stars, outer_regions
 from urpt_gcs.visibility.regions import Camera, Region, visibility_regions
 
 if TYPE_CHECKING:

@@ -22,6 +22,34 @@ from urpt_gcs.solvers._ls_kernels import (
     set_positions,
 )
 
+__all__ = [
+    "F_BEST",
+    "F_CUR",
+    "F_TEMP",
+    "I_ITER",
+    "I_LAST",
+    "I_PHASE",
+    "I_RESTARTS",
+    "N_INSERTIONS",
+    "N_REMOVALS",
+    "P_COOL",
+    "P_NOISE",
+    "P_POWER",
+    "P_TEMP0",
+    "P_TEMP_MIN",
+    "Q_HORIZON",
+    "Q_KMAX",
+    "Q_MOVES",
+    "Q_RESTARTS",
+    "Q_STALL",
+    "insert_clusters",
+    "lns_chunk",
+    "queue_all",
+    "rebuild",
+    "recombine",
+    "remove_clusters",
+]
+
 # Slots of the float state vector of one trial (see lns_chunk) ...
 F_CUR, F_BEST, F_TEMP = 0, 1, 2
 # ... of its int state vector ...

@@ -24,6 +24,27 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+__all__ = [
+    "DP_WORK_CAP",
+    "EPS",
+    "OR_OPT",
+    "SYMMETRIC",
+    "TWO_OPT",
+    "best_insertion",
+    "cycle_cost",
+    "descend_nodes",
+    "dist",
+    "dtr",
+    "insert_at",
+    "local_search",
+    "local_search_for",
+    "push",
+    "push_around",
+    "remove_at",
+    "reopt_nodes",
+    "set_positions",
+]
+
 EPS = 1e-9
 # Bits of the ``moves`` argument of local_search: the distances are symmetric; use 2-opt;
 # use Or-opt. Moving single clusters and the exact node choice are always on.

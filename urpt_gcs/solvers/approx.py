@@ -34,16 +34,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import DISC_PACKING_ALPHA, geometric_lower_bound, greedy_disjoint
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.solvers.base import (
-    DISC_PACKING_ALPHA,
-    SolveSettings,
-    Tour,
-    finish_placed_tour,
-    geometric_lower_bound,
-    greedy_disjoint,
-)
-from urpt_gcs.visibility.cover import Covers, Geometry, Instance
+from urpt_gcs.problem.instance import Covers, Geometry, Instance
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_placed_tour
+from urpt_gcs.solvers.exact import exact_work, quick_tour, search_exact
+
+__all__ = [
+    "ApproxBounds",
+    "ApproxSolver",
+    "paper_factor",
+    "paper_path",
+]
 
 # Points per circumference at which the path is offered as a photo point.
 _CIRCLE_POINTS = 72
@@ -84,8 +86,6 @@ def _centre_tour(
 ) -> tuple[list[int], bool]:
     """Shortest closed tour over the chosen centres (and the depot), solved exactly where the
     DP fits its budget and the deadline; the order and whether it is proven shortest."""
-    from urpt_gcs.solvers.exact import exact_work, quick_tour, search_exact
-
     k = len(centres)
     if k == 1:
         return [0], True

@@ -14,7 +14,15 @@ import numpy as np
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.memory import require_memory
-from urpt_gcs.visibility.cover import Instance, euclidean_matrix
+from urpt_gcs.problem.instance import Instance, euclidean_matrix
+
+__all__ = [
+    "Clustered",
+    "cluster_instance",
+    "partition_nodes",
+    "require_partition_memory",
+    "viewpoint_order",
+]
 
 
 @dataclass(frozen=True, slots=True)

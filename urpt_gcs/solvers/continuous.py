@@ -5,7 +5,7 @@ shortest tour it finds that enters every region together with a certified lower 
 *every* such tour, not only those through its candidate points:
 
 1. discretise: candidate points on every region's boundary (and one inside), each covering
-   every region it lies in -- a generalized TSP (:class:`urpt_gcs.visibility.cover.Instance`);
+   every region it lies in -- a generalized TSP (:class:`urpt_gcs.problem.instance.Instance`);
 2. solve it with the GTSP solvers (:mod:`urpt_gcs.solvers`);
 3. refine the tour continuously with the order fixed (:mod:`urpt_gcs.solvers.refine`); for
    polygons, solve again with the refined points among the candidates and refine again;
@@ -27,11 +27,20 @@ import numpy as np
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.bound.lower_bound import Bound, lower_bound
 from urpt_gcs.errors import PlanError
-from urpt_gcs.solvers import disc_tour, solve
+from urpt_gcs.problem.instance import Instance
+from urpt_gcs.problem.regions import RegionSet
+from urpt_gcs.solvers import disc_tour
 from urpt_gcs.solvers.base import SolveSettings, Tour
 from urpt_gcs.solvers.refine import closed_length, refine_touches
-from urpt_gcs.solvers.regions import RegionSet
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.solvers.registry import solve
+
+__all__ = [
+    "SAMPLES",
+    "ContinuousTour",
+    "solve_regions",
+    "stops",
+    "touches",
+]
 
 # Boundary samples per region; for discs at most _DISC_SAMPLE_BUDGET in all (no fewer than
 # _MIN_DISC_SAMPLES each).
@@ -50,15 +59,11 @@ _DISC_DISCRETE_SHARE = 0.15
 _DRIFT_ABOVE = 200
 _DRIFT = 0.002
 # The order search runs from many starts: the discrete tour, then other starts, about
-# _RESTART_S seconds each. (The search from one start settles within seconds into one
-# global shape: at 60 s pcb442_or10 stayed 3.2 % above its best known, while the best of ten
-# 3 s searches from insertion tours was 1.0 %.) For the last _RUIN_PHASE of its time the
-# shortest tour is ruined by area (:func:`disc_tour.region_ruin`, _REGION_SHARE of the
-# discs) and searched about _RUIN_S seconds, the result kept if shorter: the shape is right
-# there and parts of it are rebuilt (bubbles9: 5.9 % above its best known -> 4.5 % in 30 s,
-# where restarts do not help). (Searches of 0.5 s after each ruin did better from saved
-# tours of bubbles8 and bubbles9, but over the 37 classic instances above 200 discs at 60 s
-# the sum above the best known was 20.5 points against 20.4.)
+# _RESTART_S seconds each (the search from one start settles within seconds into one global
+# shape). For the last _RUIN_PHASE of its time the shortest tour is ruined by area
+# (:func:`disc_tour.region_ruin`, _REGION_SHARE of the discs) and searched about _RUIN_S
+# seconds, the result kept if shorter: the shape is right there and parts of it are rebuilt.
+# The figures behind these values are in benchmarks/README.md (bench cetsp).
 _RESTART_S = 3.0
 _RUIN_PHASE = 0.4
 _RUIN_S = 2.0
@@ -66,22 +71,14 @@ _REGION_SHARE = 0.12
 # Up to _DISCRETE_STARTS_UP_TO discs a restart starts from a discrete solve of the
 # candidates with a fresh seed, given _DISCRETE_START of the restart's time; above, from a
 # tour of the discs inserted in random order (:func:`disc_tour.insertion_tour`). The
-# discrete solver reaches other global shapes than insertion and the order search do: on
-# suri_CETSP-150-5_r1.0, whose best known has an inner loop that area ruins of the outer
-# shape never build, 3 of 12 such restarts (1 s solve, 2 s search) ended at the best known,
-# 1 of 10 from insertion tours (3 s search), and one 7 s discrete solve 2 seeds of 6. The
-# time that went to two more discrete solves with extra candidates around the refined tour
-# goes to restarts too: at 60 s with 1 thread 4 of 4 seeds reached the best known with
-# them gone, 2 of 4 with them kept (and these restarts), 0.86 % above it from seed 0 before.
+# discrete solver reaches other global shapes than insertion and the order search do
+# (benchmarks/README.md, bench cetsp).
 _DISCRETE_STARTS_UP_TO = _DRIFT_ABOVE
 _DISCRETE_START = 1.0 / 3.0
 # Up to _DISCRETE_STARTS_UP_TO discs around a depot, one ruin in _DEPOT_MOVE_EVERY (the
 # first of each thread's) moves the depot to another leg instead (:func:`disc_tour.depot_moved`;
 # the search's own moves do not, and its escape needs longer searches than these). Its
-# gain is not established: on bubbles4 (184 discs, a ring around the depot) at 60 s with 1
-# thread, seeds 0-3 ended 0.000, 0.045, 0.028, 0.120 % above the best known with it,
-# 0.085, 0.015, 0.022, 0.074 % without, and 0.035-0.048 % with half the ruins, drawn at
-# random, depot moves.
+# gain is not established (benchmarks/README.md, bench cetsp).
 _DEPOT_MOVE_EVERY = 2
 # Disc-segment pairs per block when a polyline's touches are found.
 _BLOCK_ELEMENTS = 1 << 18

@@ -33,11 +33,31 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.memory import require_memory
-from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
+from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.clustered import cluster_instance, partition_nodes, viewpoint_order
-from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
+from urpt_gcs.solvers.heuristic import SearchSettings, solve_clustered
+
+__all__ = [
+    "F64",
+    "I32",
+    "I64",
+    "MAX_TARGETS",
+    "MEMORY_BUDGET_BYTES",
+    "WORK_BUDGET",
+    "ExactResult",
+    "ExactSolver",
+    "ExactWork",
+    "exact_work",
+    "greedy_order",
+    "quick_tour",
+    "search_exact",
+    "solve_exact",
+    "warm_up",
+]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -374,8 +394,6 @@ def quick_tour(instance: Instance, deadline: float, seed: int = 0) -> list[int]:
     list of int
         Viewpoints in flight order (after the depot, if there is one).
     """
-    from urpt_gcs.solvers.heuristic import SearchSettings, solve_clustered
-
     greedy = greedy_order(instance)
     nodes = partition_nodes(instance)
     if nodes * nodes * 8.0 > _SEED_MATRIX_BYTES:

@@ -35,18 +35,28 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import SettingsError
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers import _lns_kernels as lns
 from urpt_gcs.solvers import _ls_kernels as ls
 from urpt_gcs.solvers._ls_kernels import EPS, OR_OPT, SYMMETRIC, TWO_OPT
-from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.clustered import (
     Clustered,
     cluster_instance,
     require_partition_memory,
     viewpoint_order,
 )
-from urpt_gcs.visibility.cover import Instance
+
+__all__ = [
+    "F64",
+    "I32",
+    "HeuristicSolver",
+    "SearchSettings",
+    "solve_clustered",
+    "warm_up",
+]
 
 I32 = npt.NDArray[np.int32]
 F64 = npt.NDArray[np.float64]

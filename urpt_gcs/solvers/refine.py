@@ -19,7 +19,14 @@ import shapely
 from shapely.geometry import LineString, Point
 
 from urpt_gcs.arrays import FloatArray, IntArray
-from urpt_gcs.solvers.regions import RegionSet
+from urpt_gcs.problem.regions import RegionSet
+
+__all__ = [
+    "Accept",
+    "best_on_disc",
+    "closed_length",
+    "refine_touches",
+]
 
 # Sweeps stop once one gains less than this fraction of the tour.
 _SWEEP_GAIN = 1e-10

@@ -15,8 +15,10 @@ import time
 import numpy as np
 from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 
+from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour, geometric_lower_bound
+from urpt_gcs.problem.instance import Instance
+from urpt_gcs.solvers.base import SolveSettings, Tour, finish_tour
 from urpt_gcs.solvers.clustered import (
     Clustered,
     cluster_instance,
@@ -24,7 +26,13 @@ from urpt_gcs.solvers.clustered import (
     require_partition_memory,
     viewpoint_order,
 )
-from urpt_gcs.visibility.cover import Instance
+
+__all__ = [
+    "MAX_NODES",
+    "RoutingSolver",
+    "route_clustered",
+    "solve_clustered",
+]
 
 # Routing needs integer arc costs; scale so that centimetres (or GTSPLIB units) survive.
 _SCALE = 100.0

@@ -31,8 +31,8 @@ import numpy as np
 from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.files.output import check_file, commit
+from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
 from urpt_gcs.site.inputs import GTSPLIB_MAX_BYTES, read_capped
-from urpt_gcs.visibility.cover import Covers, Instance, euclidean_matrix
 
 __all__ = ["export_gtsplib", "read_gtsplib", "read_tour", "write_gtsplib"]
 

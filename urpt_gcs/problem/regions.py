@@ -20,7 +20,9 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.visibility.cover import Instance
+from urpt_gcs.problem.instance import Instance
+
+__all__ = ["STAR_SECTORS", "OuterStar", "RegionSet", "polygon_star"]
 
 # Sectors of an outer star: fine enough that a piece's reach follows the region.
 STAR_SECTORS = 64
