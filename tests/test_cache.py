@@ -48,7 +48,7 @@ def test_kernels_cache_in_the_users_cache_folder(fresh_env: dict[str, str], tmp_
     assert cache_dir == str(folder)
     assert locator == "KernelCacheLocator"
     assert Path(path).parent == folder
-    assert Path(path).name.startswith("urpt_gcs.visibility.segments-")
+    assert Path(path).name.startswith("visibility.segments-")
 
 
 def test_the_cache_key_is_the_source_not_the_checkouts_path(

@@ -21,7 +21,8 @@ from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.certificate import Tighten
 from urpt_gcs.problem.regions import OuterStar, RegionSet
 from urpt_gcs.site.terrain import Terrain
-from urpt_gcs.visibility.regions import FINER_SPLIT, STAR_SECTORS, Camera, finer_wedges, star_reach
+from urpt_gcs.visibility.regions import Camera
+from urpt_gcs.visibility.stars import FINER_SPLIT, STAR_SECTORS, finer_wedges, star_reach
 
 __all__ = [
     "BOUND_MAX_REGIONS",
