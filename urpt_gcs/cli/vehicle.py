@@ -18,6 +18,8 @@ from urpt_gcs.vehicle.link import DEFAULT_URL
 if TYPE_CHECKING:
     from urpt_gcs.replay.fly import ReplaySettings
 
+__all__ = ["sitl_group", "sitl_replay_command", "upload_command"]
+
 
 @main.command("upload")
 @click.argument("mission_file", metavar="PLAN", required=False, type=click.Path(path_type=Path))
