@@ -7,7 +7,7 @@ import json
 import math
 import re
 from collections.abc import Iterator
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import click
@@ -19,11 +19,13 @@ from independent import check_mission
 from test_plan import _kml_targets, _valid_targets
 
 from urpt_gcs.batch.cluster import map_jobs, open_client
-from urpt_gcs.batch.jobs import PLAN_DEFAULTS, check_inputs, read_jobs, run_batch
+from urpt_gcs.batch.jobs import PLAN_KEYS, check_inputs, read_jobs, run_batch
 from urpt_gcs.bench.paper import Row, run_paper
 from urpt_gcs.cli import main
 from urpt_gcs.cli.plan import plan_command
 from urpt_gcs.errors import ClusterError, JobsFileError, SettingsError
+from urpt_gcs.pipeline.options import FLEET_OPTIONS, PLAN_OPTIONS
+from urpt_gcs.pipeline.settings import PlanSettings
 
 # What differs between two runs of the same plan: times, and where the files were written.
 # Times, and the certified bound (its pieces are refined until the clock says stop).
@@ -125,17 +127,26 @@ camera = ["wide", "p4", "own"]
         read_jobs(both, tmp_path / "out2")
 
 
-def test_defaults_are_those_of_the_plan_command() -> None:
+def test_defaults_are_those_of_the_plan_command(tmp_path: Path) -> None:
+    """The CLI, a jobs file and the library take one table's defaults (a job's threads aside)."""
     context = click.Context(plan_command)
     flags = {
         opt.lstrip("-"): param.get_default(context)
         for param in plan_command.params
         for opt in param.opts
-        if opt.lstrip("-") in PLAN_DEFAULTS
     }
-    assert set(flags) == set(PLAN_DEFAULTS)
-    flags["workers"] = 1  # a job's threads: one per worker process
-    assert flags == PLAN_DEFAULTS
+    table = {o.key: None if o.unset else o.default for o in (*PLAN_OPTIONS, *FLEET_OPTIONS)}
+    assert {key: flags[key] for key in table} == table
+    assert set(PLAN_KEYS) == {o.key for o in PLAN_OPTIONS}
+    library = PlanSettings()
+    for o in PLAN_OPTIONS:
+        if not o.setting:
+            continue
+        group, _, name = o.setting.rpartition(".")
+        value = getattr(getattr(library, group) if group else library, name)
+        assert value == ((not o.default) if o.invert else o.default), o.key
+    job = read_jobs(_write(tmp_path / "jobs.toml", SITE), tmp_path / "out")[0]
+    assert job.settings == replace(library, workers=1)  # a job's threads: one per worker
 
 
 SITE = '[[site]]\nname = "a"\ndem = "d.tif"\ntargets = "t.kml"\n'

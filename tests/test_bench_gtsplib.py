@@ -98,7 +98,7 @@ def test_bad_arguments_are_settings_errors(folder: Path) -> None:
         run_gtsplib(folder, ["ortools"], 0.1, 1, only=["nope"])
     with pytest.raises(SettingsError, match="--runs 0"):
         run_gtsplib(folder, ["ortools"], 0.1, 0)
-    with pytest.raises(SettingsError, match="--time-limit"):
+    with pytest.raises(SettingsError, match="time_limit_s"):
         run_gtsplib(folder, ["ortools"], -1.0, 1)
     (folder / "empty").mkdir()
     with pytest.raises(SettingsError, match=r"no \.gtsp file"):

@@ -515,7 +515,7 @@ def test_a_failing_search_thread_ends_the_others_after_their_current_search(
 def test_threads_below_one_are_refused(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from urpt_gcs.errors import SettingsError
 
-    with pytest.raises(SettingsError, match="--threads 0"):
+    with pytest.raises(SettingsError, match="threads 0"):
         SolveSettings(threads=0)
     result = CliRunner().invoke(main, ["bench", "cetsp", str(tmp_path), "--threads", "0"])
     assert result.exit_code == 2 and "--threads" in result.output

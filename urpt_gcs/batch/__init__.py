@@ -1,1 +1,5 @@
 """Many plans at once, here or on a Dask cluster."""
+
+from __future__ import annotations
+
+__all__: list[str] = []

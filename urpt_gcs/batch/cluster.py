@@ -29,6 +29,18 @@ from urpt_gcs.errors import ClusterError, SettingsError
 if TYPE_CHECKING:
     from distributed import Client
 
+__all__ = [
+    "CONNECT_TIMEOUT_S",
+    "LOCAL",
+    "WORKERS_TIMEOUT_S",
+    "Done",
+    "describe_client",
+    "map_jobs",
+    "open_client",
+    "probe_workers",
+    "run_jobs",
+]
+
 J = TypeVar("J")
 R = TypeVar("R")
 

@@ -41,10 +41,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from urpt_gcs.batch.cluster import Done, probe_workers, run_jobs
-from urpt_gcs.errors import ClusterError, JobsFileError, SettingsError, UrptError
+from urpt_gcs.batch.table import rows_csv
+from urpt_gcs.errors import (
+    ClusterError,
+    JobsFileError,
+    SettingsError,
+    UrptError,
+    memory_error_message,
+    os_error_message,
+)
 from urpt_gcs.files.output import check_folder, commit
-from urpt_gcs.site.camera import frame_from_flags
-from urpt_gcs.visibility.regions import DEFAULT_HEADINGS
+from urpt_gcs.pipeline.options import KINDS, PLAN_OPTIONS, TOML_KEYS
+from urpt_gcs.pipeline.settings import PlanSettings, plan_settings
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -54,44 +62,37 @@ else:  # pragma: no cover - Python 3.10
 if TYPE_CHECKING:
     from distributed import Client
 
-    from urpt_gcs.pipeline.settings import PlanSettings
+__all__ = [
+    "CAMERA_KEYS",
+    "JOB_THREADS",
+    "PLAN_KEYS",
+    "RESULTS_FILE",
+    "SITE_KEYS",
+    "SWEEP_KEYS",
+    "Job",
+    "JobDone",
+    "JobOutput",
+    "Row",
+    "check_inputs",
+    "error_line",
+    "output_folders",
+    "read_jobs",
+    "results_csv",
+    "run_batch",
+    "run_job",
+    "summary_table",
+    "write_results",
+]
 
 RESULTS_FILE = "batch.csv"
-# The cone camera's half-angle when a job names no camera at all, as `plan` takes it.
-_CONE_FOV_DEG = 30.0
 # Threads a job's line-of-sight tests use unless its site says otherwise: a worker is one
 # process of one thread, and its neighbours have the other cores.
 JOB_THREADS = 1
 
-# The `urpt-gcs plan` options a site may set, and the kind of value each takes.
-_NUMBER, _INTEGER, _FLAG, _TEXT = "a number", "a whole number", "true or false", "a string"
-PLAN_KEYS: dict[str, str] = {
-    "band": _INTEGER,
-    "workers": _INTEGER,
-    "fov": _NUMBER,
-    "camera": _TEXT,
-    "sensor": _TEXT,
-    "focal": _NUMBER,
-    "image": _TEXT,
-    "headings": _INTEGER,
-    "gsd": _NUMBER,
-    "samples": _INTEGER,
-    "altitude": _NUMBER,
-    "clearance": _NUMBER,
-    "min-clearance": _NUMBER,
-    "position-tolerance": _NUMBER,
-    "max-agl": _NUMBER,
-    "strict": _FLAG,
-    "endurance": _NUMBER,
-    "no-map": _FLAG,
-    "home": _TEXT,
-    "hold": _NUMBER,
-    "speed": _NUMBER,
-    "firmware": _TEXT,
-    "solver": _TEXT,
-    "time-limit": _NUMBER,
-    "seed": _INTEGER,
-}
+# The `urpt-gcs plan` options a site may set (every setting of the table a jobs file takes),
+# and what each takes.
+PLAN_KEYS: dict[str, str] = {o.key: KINDS[o.kind] for o in PLAN_OPTIONS if o.in_jobs}
+_TEXT, _NUMBER = KINDS["text"], KINDS["number"]
 CAMERA_KEYS = {
     key: PLAN_KEYS[key] for key in ("fov", "camera", "sensor", "focal", "image", "headings", "gsd")
 }
@@ -233,10 +234,10 @@ def _known(
 
 def _check_value(path: Path, where: str, key: str, kind: str, value: object) -> None:
     ok = {
-        _NUMBER: isinstance(value, (int, float)) and not isinstance(value, bool),
-        _INTEGER: isinstance(value, int) and not isinstance(value, bool),
-        _FLAG: isinstance(value, bool),
-        _TEXT: isinstance(value, str),
+        KINDS["number"]: isinstance(value, (int, float)) and not isinstance(value, bool),
+        KINDS["integer"]: isinstance(value, int) and not isinstance(value, bool),
+        KINDS["flag"]: isinstance(value, bool),
+        KINDS["text"]: isinstance(value, str),
     }[kind]
     if not ok:
         raise JobsFileError(f"{path}: {where}, key '{key}': {value!r} is not {kind}: give {kind}")
@@ -340,9 +341,11 @@ def _site_jobs(
                 "rename the site"
             )
         try:
-            settings = plan_settings(chosen)
+            settings = plan_settings({"workers": JOB_THREADS, **chosen})
         except SettingsError as exc:
-            raise JobsFileError(f"{path}: {where} (job {job_name}): {exc}") from None
+            raise JobsFileError(
+                f"{path}: {where} (job {job_name}): {exc.naming(TOML_KEYS)}"
+            ) from None
         jobs.append(
             Job(
                 name=job_name,
@@ -366,96 +369,6 @@ def _label(value: object) -> str:
     if isinstance(value, float) and value.is_integer():
         return str(int(value))
     return str(value)
-
-
-# What `urpt-gcs plan` uses for an option not given (the CLI's defaults; a test holds them
-# equal), except the threads of a job (see JOB_THREADS).
-PLAN_DEFAULTS: dict[str, Any] = {
-    "band": None,
-    "workers": JOB_THREADS,
-    "fov": None,
-    "camera": None,
-    "sensor": None,
-    "focal": None,
-    "image": None,
-    "headings": DEFAULT_HEADINGS,
-    "gsd": None,
-    "samples": 36,
-    "altitude": None,
-    "clearance": 30.0,
-    "min-clearance": 10.0,
-    "position-tolerance": 1.5,
-    "max-agl": 120.0,
-    "strict": False,
-    "endurance": 20.0,
-    "no-map": False,
-    "home": None,
-    "hold": 2.0,
-    "speed": 5.0,
-    "firmware": "ardupilot",
-    "solver": "auto",
-    "time-limit": 5.0,
-    "seed": 0,
-}
-
-
-def plan_settings(options: Mapping[str, Any]) -> PlanSettings:
-    """The :class:`PlanSettings` of ``urpt-gcs plan`` given these options (flag names as
-    keys, ``PLAN_DEFAULTS`` for the others).
-
-    Raises
-    ------
-    SettingsError
-        A value out of range (the message names the flag).
-    """
-    from urpt_gcs.flight.mission import MissionSettings
-    from urpt_gcs.pipeline.settings import PlanSettings
-    from urpt_gcs.solvers import SolveSettings
-
-    o = {**PLAN_DEFAULTS, **options}
-    number = {k: float(v) for k, v in o.items() if PLAN_KEYS[k] == _NUMBER and v is not None}
-    frame = frame_from_flags(o["camera"], o["sensor"], number.get("focal"), o["image"])
-    if frame is not None and "fov" in number:
-        raise SettingsError(
-            "fov is the cone camera's half-angle and camera/sensor a frame camera: give one"
-        )
-    return PlanSettings(
-        fov_deg=number.get("fov", _CONE_FOV_DEG),
-        frame=frame,
-        gsd_cm=number.get("gsd"),
-        headings=o["headings"],
-        samples=o["samples"],
-        altitude_m=number.get("altitude"),
-        clearance_m=number["clearance"],
-        min_clearance_m=number["min-clearance"],
-        position_tolerance_m=number["position-tolerance"],
-        max_agl_m=number["max-agl"],
-        strict=o["strict"],
-        endurance_min=number["endurance"],
-        home=_home(o["home"]),
-        band=o["band"],
-        workers=o["workers"],
-        solver=o["solver"],
-        solve=SolveSettings(time_limit_s=number["time-limit"], seed=o["seed"]),
-        mission=MissionSettings(
-            firmware=o["firmware"],
-            hold_s=number["hold"],
-            cruise_speed_m_s=number["speed"],
-            hover_speed_m_s=number["speed"],
-        ),
-    )
-
-
-def _home(text: str | None) -> tuple[float, float] | None:
-    if text is None:
-        return None
-    try:
-        lat, lon = (float(part) for part in text.split(","))
-    except ValueError:
-        raise SettingsError(
-            f'home {text!r} is not LAT,LON: give it as e.g. home = "47.3977,8.5456"'
-        ) from None
-    return lat, lon
 
 
 # -- running ---------------------------------------------------------------------------------
@@ -596,9 +509,9 @@ def run_batch(
 
 def error_line(exc: BaseException) -> str:
     """A job's error on one line: the message of our errors, the kind of any other."""
-    from urpt_gcs.cli._root import memory_error_message, os_error_message
-
-    if isinstance(exc, UrptError):
+    if isinstance(exc, SettingsError):
+        text = exc.naming(TOML_KEYS)
+    elif isinstance(exc, UrptError):
         text = str(exc)
     elif isinstance(exc, MemoryError):
         text = memory_error_message(exc)
@@ -639,8 +552,6 @@ def _row(
 
 def results_csv(rows: Sequence[Row]) -> str:
     """``batch.csv``: a header of the fields, absent values left empty."""
-    from urpt_gcs.bench import rows_csv
-
     return rows_csv(Row, rows)
 
 

@@ -10,18 +10,4 @@ One module per study, each a library call the ``urpt-gcs bench`` command group w
 
 from __future__ import annotations
 
-import csv
-import io
-from collections.abc import Sequence
-from dataclasses import astuple, fields
-from typing import Any
-
-
-def rows_csv(row_type: type[Any], rows: Sequence[Any]) -> str:
-    """Dataclass rows as CSV text: a header of the field names, absent values left empty."""
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow([f.name for f in fields(row_type)])
-    for row in rows:
-        writer.writerow(["" if value is None else value for value in astuple(row)])
-    return buffer.getvalue()
+__all__: list[str] = []

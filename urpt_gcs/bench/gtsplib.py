@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from urpt_gcs.bench import rows_csv
+from urpt_gcs.batch.table import rows_csv
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.files.formats.gtsplib import BENCH_FLAG, read_gtsplib
 from urpt_gcs.files.output import write_all
@@ -290,7 +290,7 @@ def run_gtsplib(
 
 
 def results_csv(rows: Sequence[Row]) -> str:
-    """The rows as CSV text (see :func:`urpt_gcs.bench.rows_csv`)."""
+    """The rows as CSV text (see :func:`urpt_gcs.batch.table.rows_csv`)."""
     return rows_csv(Row, rows)
 
 

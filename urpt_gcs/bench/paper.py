@@ -33,7 +33,7 @@ from affine import Affine
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.batch.cluster import map_jobs
-from urpt_gcs.bench import rows_csv
+from urpt_gcs.batch.table import rows_csv
 from urpt_gcs.bound.certificate import Certificate, certify
 from urpt_gcs.bound.geometric import DISC_PACKING_ALPHA, greedy_disjoint
 from urpt_gcs.files.output import write_all

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from pyproj import Transformer
 from rasterio.transform import Affine
 
-from urpt_gcs.bench import rows_csv
+from urpt_gcs.batch.table import rows_csv
 from urpt_gcs.errors import OutputError, SettingsError, UrptError
 
 EPSG = 32632

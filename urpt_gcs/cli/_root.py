@@ -10,7 +10,6 @@ exits 130, as a shell reports a command stopped by SIGINT.
 from __future__ import annotations
 
 import errno
-import os
 import sys
 from collections.abc import Callable
 from typing import Any, NoReturn
@@ -18,15 +17,33 @@ from typing import Any, NoReturn
 import click
 
 from urpt_gcs import __version__
-from urpt_gcs.errors import SettingsError, UrptError
+from urpt_gcs.errors import (
+    SettingsError,
+    UrptError,
+    memory_error_message,
+    os_error_message,
+)
 from urpt_gcs.flight.geofence import Geofence
 from urpt_gcs.flight.mission import Mission
+from urpt_gcs.pipeline.options import FLAGS
+
+__all__ = [
+    "INTERRUPTED_EXIT",
+    "RootGroup",
+    "fail",
+    "interrupted",
+    "main",
+    "terminal_progress",
+    "upload_and_report",
+]
 
 INTERRUPTED_EXIT = 130  # 128 + SIGINT
 
 
-def fail(exc: UrptError) -> None:
-    message = " ".join(str(exc).split())
+def fail(exc: UrptError) -> NoReturn:
+    """One line on stderr, exit 1; a setting is named by its flag."""
+    text = exc.naming(FLAGS) if isinstance(exc, SettingsError) else str(exc)
+    message = " ".join(text.split())
     click.echo(f"urpt-gcs: error: {message}", err=True)
     sys.exit(1)
 
@@ -35,44 +52,6 @@ def interrupted() -> NoReturn:
     """Ctrl-C: one line on stderr, exit 130."""
     click.echo("urpt-gcs: interrupted", err=True)
     sys.exit(INTERRUPTED_EXIT)
-
-
-# What to do about the OSErrors an operator can cause or cure.
-_OS_FIXES = {
-    errno.ENAMETOOLONG: "give a shorter name",
-    errno.ENOSPC: "free some disk space or write elsewhere",
-    errno.EDQUOT: "free some disk space or write elsewhere",
-    errno.EACCES: "check its permissions or use another folder",
-    errno.EPERM: "check its permissions or use another folder",
-    errno.EROFS: "write to another folder",
-    errno.ENOENT: "check the path",
-    errno.ENOTDIR: "check the path: a part of it is a file",
-    errno.EISDIR: "give a file, not a folder",
-    errno.EMFILE: "close other programs' files and run again",
-    errno.ENOMEM: "free some memory and run again",
-}
-
-
-def os_error_message(exc: OSError) -> str:
-    """One line naming the file (when the error knows it), the reason and what to do."""
-    reason = exc.strerror or errno.errorcode.get(exc.errno or 0, "") or str(exc) or "I/O error"
-    fix = _OS_FIXES.get(exc.errno or 0, "check the path, the permissions and the free space")
-    names = [os.fsdecode(n) for n in (exc.filename, exc.filename2) if n is not None]
-    where = " -> ".join(f"'{_shorten(name)}'" for name in names)
-    return f"{where + ': ' if where else ''}{reason}: {fix}"
-
-
-def memory_error_message(exc: MemoryError) -> str:
-    """One line with the size that could not be had (numpy says it) and what to change."""
-    detail = " ".join(str(exc).split())
-    return (
-        f"out of memory{f' ({detail})' if detail else ''}: plan fewer targets at a time, "
-        "lower --samples, or use a smaller DEM"
-    )
-
-
-def _shorten(name: str, limit: int = 120) -> str:
-    return name if len(name) <= limit else f"{name[: limit // 2]}...{name[-limit // 2 :]}"
 
 
 class RootGroup(click.Group):
@@ -108,13 +87,9 @@ def upload_and_report(
     from urpt_gcs.vehicle.link import upload
 
     progress = terminal_progress()
-    try:
-        report = upload(
-            mission, url, retries=retries, timeout_s=timeout_s, progress=progress, fence=fence
-        )
-    except UrptError as exc:
-        fail(exc)
-        return
+    report = upload(
+        mission, url, retries=retries, timeout_s=timeout_s, progress=progress, fence=fence
+    )
     for warning in report.warnings:
         click.echo(f"urpt-gcs: warning: {warning}", err=True)
     if not quiet:
@@ -135,19 +110,6 @@ def terminal_progress() -> Callable[[str], None] | None:
     if not sys.stderr.isatty():
         return None
     return lambda msg: click.echo(f"... {msg}", err=True)
-
-
-def parse_home(text: str | None) -> tuple[float, float] | None:
-    if text is None:
-        return None
-    parts = text.split(",")
-    try:
-        lat, lon = (float(p) for p in parts)
-    except ValueError:
-        raise SettingsError(
-            f"--home {text!r} is not LAT,LON: give it as e.g. --home 47.3977,8.5456"
-        ) from None
-    return lat, lon
 
 
 @click.group(cls=RootGroup, context_settings={"help_option_names": ["-h", "--help"]})

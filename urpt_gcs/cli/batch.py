@@ -8,19 +8,15 @@ from pathlib import Path
 
 import click
 
-from urpt_gcs.cli._root import fail, main
-from urpt_gcs.errors import UrptError
+from urpt_gcs.cli._root import main
+from urpt_gcs.cli.options import out_option
+
+__all__ = ["batch_command"]
 
 
 @main.command("batch")
 @click.argument("jobs_file", metavar="JOBS.toml", type=click.Path(path_type=Path))
-@click.option(
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(path_type=Path),
-    help="Folder for batch.csv and one folder per job.",
-)
+@out_option("Folder for batch.csv and one folder per job.", required=True)
 @click.option(
     "--scheduler",
     default=None,
@@ -71,18 +67,14 @@ def batch_command(
         line = f"[{count}/{total}] {row.job} {what}" + (f" ({where})" if where else "")
         click.echo(line + (f": {row.error}" if row.error else ""))
 
-    try:
-        jobs = read_jobs(jobs_file, out)
-        # What can be refused here is refused before a cluster is started.
-        output_folders(jobs, out)
-        check_inputs(jobs, None, remote=scheduler is not None)
-        with open_client(scheduler, workers) as client:
-            if not quiet:
-                click.echo(f"{len(jobs)} jobs on {describe_client(client)}")
-            rows = run_batch(jobs, out, client, ended, remote=scheduler is not None)
-    except UrptError as exc:
-        fail(exc)
-        return
+    jobs = read_jobs(jobs_file, out)
+    # What can be refused here is refused before a cluster is started.
+    output_folders(jobs, out)
+    check_inputs(jobs, None, remote=scheduler is not None)
+    with open_client(scheduler, workers) as client:
+        if not quiet:
+            click.echo(f"{len(jobs)} jobs on {describe_client(client)}")
+        rows = run_batch(jobs, out, client, ended, remote=scheduler is not None)
     failed = [r for r in rows if r.status != "ok"]
     if not quiet:
         click.echo(summary_table(rows))

@@ -9,11 +9,21 @@ from typing import TYPE_CHECKING
 
 import click
 
-from urpt_gcs.cli._root import fail, main, terminal_progress
-from urpt_gcs.errors import UrptError
+from urpt_gcs.cli._root import main, terminal_progress
+from urpt_gcs.cli.options import out_option
 
 if TYPE_CHECKING:
     from distributed import Client
+
+__all__ = [
+    "bench_cetsp_command",
+    "bench_client",
+    "bench_group",
+    "bench_gtsplib_command",
+    "bench_paper_command",
+    "bench_scale_command",
+    "cluster_options",
+]
 
 
 @main.group("bench")
@@ -31,9 +41,7 @@ def bench_group() -> None:
 )
 @click.option("--runs", type=int, default=1, show_default=True, help="Runs (seeds) per solver.")
 @click.option("--only", default=None, metavar="NAME[,NAME]", help="Run only these instances.")
-@click.option(
-    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
-)
+@out_option("Folder for results.csv.")
 @click.option(
     "--solver",
     default=None,
@@ -54,19 +62,15 @@ def bench_gtsplib_command(
     def names(text: str | None) -> list[str]:
         return [part.strip() for part in (text or "").split(",") if part.strip()]
 
-    try:
-        rows = run_gtsplib(
-            directory,
-            solvers=names(solver),
-            time_limit_s=time_limit,
-            runs=runs,
-            only=names(only) or None,
-            out_dir=out,
-            progress=terminal_progress(),
-        )
-    except UrptError as exc:
-        fail(exc)
-        return
+    rows = run_gtsplib(
+        directory,
+        solvers=names(solver),
+        time_limit_s=time_limit,
+        runs=runs,
+        only=names(only) or None,
+        out_dir=out,
+        progress=terminal_progress(),
+    )
     click.echo(format_table(rows))
 
 
@@ -119,9 +123,7 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
     default=None,
     help="Run only instances with at most this many discs.",
 )
-@click.option(
-    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
-)
+@out_option("Folder for results.csv.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the search.")
 @click.option(
     "--threads",
@@ -147,31 +149,25 @@ def bench_cetsp_command(
     from urpt_gcs.bench.cetsp import format_table, run_cetsp
 
     names = [part.strip() for part in (only or "").split(",") if part.strip()]
-    try:
-        with bench_client(scheduler, workers) as client:
-            rows = run_cetsp(
-                directory,
-                time_limit_s=time_limit,
-                only=names or None,
-                out_dir=out,
-                progress=terminal_progress(),
-                seed=seed,
-                client=client,
-                min_discs=min_discs,
-                max_discs=max_discs,
-                threads=threads,
-            )
-    except UrptError as exc:
-        fail(exc)
-        return
+    with bench_client(scheduler, workers) as client:
+        rows = run_cetsp(
+            directory,
+            time_limit_s=time_limit,
+            only=names or None,
+            out_dir=out,
+            progress=terminal_progress(),
+            seed=seed,
+            client=client,
+            min_discs=min_discs,
+            max_discs=max_discs,
+            threads=threads,
+        )
     click.echo(format_table(rows))
 
 
 @bench_group.command("paper")
 @click.option("--quick", is_flag=True, help="A small subset of the study (what CI runs).")
-@click.option(
-    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
-)
+@out_option("Folder for results.csv.")
 @click.option(
     "--heuristic-time",
     type=float,
@@ -208,20 +204,16 @@ def bench_paper_command(
     """Reproduce the paper's simulation study: 540 instances on random TIN terrains."""
     from urpt_gcs.bench.paper import format_tables, run_paper
 
-    try:
-        with bench_client(scheduler, workers) as client:
-            rows = run_paper(
-                quick=quick,
-                out_dir=out,
-                heuristic_s=heuristic_time,
-                progress=terminal_progress(),
-                client=client,
-                bound_s=bound_time,
-                bound_gap=bound_gap / 100.0,
-            )
-    except UrptError as exc:
-        fail(exc)
-        return
+    with bench_client(scheduler, workers) as client:
+        rows = run_paper(
+            quick=quick,
+            out_dir=out,
+            heuristic_s=heuristic_time,
+            progress=terminal_progress(),
+            client=client,
+            bound_s=bound_time,
+            bound_gap=bound_gap / 100.0,
+        )
     click.echo(format_tables(rows))
 
 
@@ -243,9 +235,7 @@ def bench_paper_command(
     help="Side of the synthetic DSM in cells (0.3 m each).",
 )
 @click.option("--seed", type=int, default=1, show_default=True, help="Seed of the sites.")
-@click.option(
-    "--out", "out", type=click.Path(path_type=Path), default=None, help="Folder for results.csv."
-)
+@out_option("Folder for results.csv.")
 def bench_scale_command(targets: str, size_px: int, seed: int, out: Path | None) -> None:
     """Plan synthetic Pix4D-like sites: per-stage wall time, peak RSS, visibility/read ratio."""
     from urpt_gcs.bench.scale import format_table, run_scale
@@ -254,11 +244,5 @@ def bench_scale_command(targets: str, size_px: int, seed: int, out: Path | None)
         counts = [int(part) for part in targets.split(",") if part.strip()]
     except ValueError:
         raise click.BadParameter(f"{targets!r} is not a list of numbers, e.g. 100,1000") from None
-    try:
-        rows = run_scale(
-            counts, size_px=size_px, out_dir=out, seed=seed, progress=terminal_progress()
-        )
-    except UrptError as exc:
-        fail(exc)
-        return
+    rows = run_scale(counts, size_px=size_px, out_dir=out, seed=seed, progress=terminal_progress())
     click.echo(format_table(rows))

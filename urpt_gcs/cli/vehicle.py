@@ -11,12 +11,14 @@ from typing import TYPE_CHECKING
 
 import click
 
-from urpt_gcs.cli._root import fail, main, terminal_progress, upload_and_report
-from urpt_gcs.errors import SettingsError, UrptError
+from urpt_gcs.cli._root import main, terminal_progress, upload_and_report
+from urpt_gcs.errors import SettingsError
 from urpt_gcs.vehicle.link import DEFAULT_URL
 
 if TYPE_CHECKING:
     from urpt_gcs.replay.fly import ReplaySettings
+
+__all__ = ["sitl_group", "sitl_replay_command", "upload_command"]
 
 
 @main.command("upload")
@@ -80,22 +82,17 @@ def upload_command(
 
     if fleet_dir is not None:
         if mission_file is not None:
-            fail(SettingsError("give PLAN or --fleet OUT, not both"))
+            raise SettingsError("give PLAN or --fleet OUT, not both")
         _upload_fleet(fleet_dir, connects, sysid, sortie, retries, timeout)
         return
     if mission_file is None:
-        fail(SettingsError("no mission given: urpt-gcs upload PLAN, or --fleet OUT"))
-        return
+        raise SettingsError("no mission given: urpt-gcs upload PLAN, or --fleet OUT")
     if sysid is not None:
-        fail(SettingsError("--sysid names the vehicles of a --fleet upload: add --fleet OUT"))
+        raise SettingsError("--sysid names the vehicles of a --fleet upload: add --fleet OUT")
     if len(connects) > 1:
-        fail(SettingsError("several --connect are for --fleet: give one for a single mission"))
-    try:
-        mission = read_mission(mission_file, flag="urpt-gcs upload")
-        fence = read_fence(mission_file)
-    except UrptError as exc:
-        fail(exc)
-        return
+        raise SettingsError("several --connect are for --fleet: give one for a single mission")
+    mission = read_mission(mission_file, flag="urpt-gcs upload")
+    fence = read_fence(mission_file)
     url = connects[0] if connects else DEFAULT_URL
     upload_and_report(mission, url, retries, timeout, quiet=False, fence=fence)
 
@@ -112,16 +109,12 @@ def _upload_fleet(
     from urpt_gcs.vehicle.fleet_upload import parse_system_ids, report_lines, upload_fleet
     from urpt_gcs.vehicle.link import UploadSettings
 
-    try:
-        fleet = read_fleet(folder)
-        ids = parse_system_ids(sysid) if sysid is not None else None
-        urls = connects or (DEFAULT_URL,)
-        report = upload_fleet(
-            fleet, urls, ids, UploadSettings(retries, timeout), terminal_progress(), sortie
-        )
-    except UrptError as exc:
-        fail(exc)
-        return
+    fleet = read_fleet(folder)
+    ids = parse_system_ids(sysid) if sysid is not None else None
+    urls = connects or (DEFAULT_URL,)
+    report = upload_fleet(
+        fleet, urls, ids, UploadSettings(retries, timeout), terminal_progress(), sortie
+    )
     for entry in report.vehicles:
         for warning in entry.report.warnings if entry.report is not None else ():
             click.echo(f"urpt-gcs: warning: {entry.vehicle.name}: {warning}", err=True)
@@ -210,8 +203,6 @@ def sitl_group(
             err=True,
         )
         server.serve()
-    except UrptError as exc:
-        fail(exc)
     except KeyboardInterrupt:
         click.echo("simulator stopped", err=True)
 
@@ -311,40 +302,36 @@ def sitl_replay_command(
     from urpt_gcs.replay.px4 import find_build
 
     progress = terminal_progress()
-    try:
-        binary = None
-        if ardupilot is not None:
-            binary = resolve_binary(ardupilot or os.environ.get(ENV_VAR))
-        settings = ReplaySettings(
-            px4=find_build(px4) if px4 is not None else None,
-            speedup=speedup,
-            fov_deg=fov,
-            min_clearance_m=min_clearance,
-            takeoff=takeoff,  # type: ignore[arg-type]  # click.Choice checked it
-            timeout_s=timeout,
-            connect=connect,
-            ardupilot=binary,
-        )
-        if fleet_dir is not None:
-            if plan_files:
-                raise SettingsError("give --plan or --fleet, not both")
-            _replay_fleet(dem, targets, fleet_dir, settings, progress)
-            return
-        if not plan_files:
-            raise SettingsError("no mission given: --plan PLAN (or --fleet OUT for a fleet)")
-        files = mission_files(plan_files)
-        if len(files) == 1:
-            report = replay(dem, targets, files[0], settings, progress)
-            reports, text, ok = [report], report_text(report), report.ok
-            problems = list(report.problems)
-        else:
-            together = replay_set(dem, targets, files, settings, progress)
-            reports, text, ok = list(together.reports), set_report_text(together), together.ok
-            problems = [*together.problems]
-            problems += [f"{r.plan}: {p}" for r in together.reports for p in r.problems]
-    except UrptError as exc:
-        fail(exc)
+    binary = None
+    if ardupilot is not None:
+        binary = resolve_binary(ardupilot or os.environ.get(ENV_VAR))
+    settings = ReplaySettings(
+        px4=find_build(px4) if px4 is not None else None,
+        speedup=speedup,
+        fov_deg=fov,
+        min_clearance_m=min_clearance,
+        takeoff=takeoff,  # type: ignore[arg-type]  # click.Choice checked it
+        timeout_s=timeout,
+        connect=connect,
+        ardupilot=binary,
+    )
+    if fleet_dir is not None:
+        if plan_files:
+            raise SettingsError("give --plan or --fleet, not both")
+        _replay_fleet(dem, targets, fleet_dir, settings, progress)
         return
+    if not plan_files:
+        raise SettingsError("no mission given: --plan PLAN (or --fleet OUT for a fleet)")
+    files = mission_files(plan_files)
+    if len(files) == 1:
+        report = replay(dem, targets, files[0], settings, progress)
+        reports, text, ok = [report], report_text(report), report.ok
+        problems = list(report.problems)
+    else:
+        together = replay_set(dem, targets, files, settings, progress)
+        reports, text, ok = list(together.reports), set_report_text(together), together.ok
+        problems = [*together.problems]
+        problems += [f"{r.plan}: {p}" for r in together.reports for p in r.problems]
     for warning in (w for r in reports for w in r.expected.warnings):
         click.echo(f"urpt-gcs: warning: {warning}", err=True)
     click.echo(text)

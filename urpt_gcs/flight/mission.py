@@ -153,18 +153,25 @@ class MissionSettings:
     hover_speed_m_s: float = DEFAULT_SPEED_M_S
 
     def __post_init__(self) -> None:
+        # The messages name the settings; the CLI shows their flags (SettingsError.naming).
         if self.firmware not in FIRMWARES:
-            raise SettingsError(
-                f"--firmware {self.firmware!r} is not supported; use one of {', '.join(FIRMWARES)}"
+            raise SettingsError.about(
+                "{firmware} {value!r} is not supported; use one of {known}",
+                value=self.firmware,
+                known=", ".join(FIRMWARES),
             )
         if not (math.isfinite(self.hold_s) and 0.0 <= self.hold_s <= 3600.0):
-            raise SettingsError(f"--hold {self.hold_s} s is out of range; use 0 to 3600 seconds")
+            raise SettingsError.about(
+                "{hold_s} {value} s is out of range; use 0 to 3600 seconds", value=self.hold_s
+            )
         for name, value in (
-            ("--speed", self.cruise_speed_m_s),
-            ("hover speed", self.hover_speed_m_s),
+            ("cruise_speed_m_s", self.cruise_speed_m_s),
+            ("hover_speed_m_s", self.hover_speed_m_s),
         ):
             if not (math.isfinite(value) and 0.1 <= value <= 50.0):
-                raise SettingsError(f"{name} {value} m/s is out of range; use 0.1 to 50 m/s")
+                raise SettingsError.about(
+                    "{" + name + "} {value} m/s is out of range; use 0.1 to 50 m/s", value=value
+                )
 
 
 def commanded_speed(items: Sequence[MissionItem]) -> float | None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.flight.mission import GeoPoint
+from urpt_gcs.site.position import parse_latlon
 
 # ArduPilot's capacity on common boards: (storage bytes - 4) / 15 items (see FACTS).
 DEFAULT_CAPACITY = 700
@@ -90,10 +91,5 @@ class VehicleSettings:
 
 def parse_home(text: str) -> GeoPoint:
     """``LAT,LON,ALT`` (degrees, degrees, metres AMSL) as a :class:`GeoPoint`."""
-    try:
-        lat, lon, alt = (float(part) for part in text.split(","))
-    except ValueError:
-        raise SettingsError(
-            f"--home {text!r} is not LAT,LON,ALT: give it as e.g. --home 47.3977,8.5456,488"
-        ) from None
+    lat, lon, alt = parse_latlon(text, "home", with_alt=True)
     return GeoPoint(lat, lon, alt)

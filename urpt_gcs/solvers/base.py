@@ -34,15 +34,19 @@ class SolveSettings:
     threads: int = 1
 
     def __post_init__(self) -> None:
+        # The messages name the settings; the CLI shows their flags (SettingsError.naming).
         if self.threads < 1:
-            raise SettingsError(f"--threads {self.threads} must be at least 1")
+            raise SettingsError.about("{threads} {value} must be at least 1", value=self.threads)
         if not (math.isfinite(self.time_limit_s) and self.time_limit_s > 0.0):
-            raise SettingsError(
-                f"--time-limit {self.time_limit_s} must be a positive number of seconds"
+            raise SettingsError.about(
+                "{time_limit_s} {value} must be a positive number of seconds",
+                value=self.time_limit_s,
             )
         # numpy's generators take only non-negative seeds; 32 bits is what every one accepts.
         if not 0 <= self.seed <= SEED_MAX:
-            raise SettingsError(f"--seed {self.seed} is out of range; use 0 to {SEED_MAX}")
+            raise SettingsError.about(
+                "{seed} {value} is out of range; use 0 to {high}", value=self.seed, high=SEED_MAX
+            )
 
 
 @dataclass(frozen=True, slots=True)
