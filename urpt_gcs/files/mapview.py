@@ -24,7 +24,7 @@ from matplotlib.transforms import Affine2D
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.files.report import flight_quality, flown_stops, sortie_colour
 from urpt_gcs.flight.mission import waypoint_positions
-from urpt_gcs.pipeline.planner import Plan
+from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.site.terrain import WGS84, Terrain
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.

@@ -28,7 +28,7 @@ import pyproj
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.files.report import flown_stops, sortie_colour
-from urpt_gcs.pipeline.planner import Plan
+from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.site.terrain import WGS84
 
 KML_NS = "http://www.opengis.net/kml/2.2"
