@@ -408,3 +408,13 @@ def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
     fig.tight_layout()
     return fig
+
+
+__all__ = [
+    "fleet_figure",
+    "frame_footprints",
+    "map_figure",
+    "render_fleet_map",
+    "render_map",
+    "sortie_routes",
+]

@@ -153,3 +153,16 @@ def write_products(
     data, files = render_products(plan, destination.folder, with_map)
     commit([(destination, files), *also])
     return data
+
+
+__all__ = [
+    "MAP_FILE",
+    "PRODUCT_NAMES",
+    "SUMMARY_FILE",
+    "check_extra",
+    "check_out",
+    "mission_stems",
+    "render_products",
+    "replay_checks",
+    "write_products",
+]

@@ -456,3 +456,14 @@ def summary_text(data: dict[str, Any]) -> str:
     if data["files"]:
         lines.append("files          " + "\n               ".join(data["files"]))
     return "\n".join(lines)
+
+
+__all__ = [
+    "SORTIE_COLOURS",
+    "FlownStop",
+    "flight_quality",
+    "flown_stops",
+    "sortie_colour",
+    "summary",
+    "summary_text",
+]

@@ -82,6 +82,7 @@ class FleetPlan:
 
     @property
     def makespan_s(self) -> float:
+        """When the last vehicle has landed, from the first take-off."""
         return max(self.finish_s)
 
     @property
@@ -93,7 +94,21 @@ class FleetPlan:
 
 @dataclass(frozen=True, slots=True)
 class VehicleLayer:
-    """One vehicle's settings, site, area, regions and instance."""
+    """One vehicle's settings, site, area, regions and instance.
+
+    Attributes
+    ----------
+    settings
+        The plan's settings with this vehicle's home, altitude, endurance and speed.
+    site
+        The site with this vehicle's home.
+    area
+        The DEM window and the flight plane of its layer.
+    regions
+        Each target's visibility region from its layer.
+    instance
+        Its viewpoints and what each sees, from its home.
+    """
 
     settings: PlanSettings
     site: SiteInputs
@@ -141,7 +156,29 @@ def fleet_problem(
     fleet: FleetSettings,
     stages: Stages | None = None,
 ) -> FleetProblem:
-    """Read the site and build every vehicle's layer, regions and viewpoints."""
+    """Read the site and build every vehicle's layer, regions and viewpoints.
+
+    Parameters
+    ----------
+    dem_path, targets_path, settings
+        As for :func:`urpt_gcs.pipeline.planner.plan`; ``settings`` gives every vehicle's
+        defaults.
+    fleet
+        The vehicles and their separation.
+    stages
+        Announces each stage and keeps its time (None: silently).
+
+    Returns
+    -------
+    FleetProblem
+        Every vehicle's layer, the vehicles as the fleet's search sees them, and the reference
+        and widest instances.
+
+    Raises
+    ------
+    urpt_gcs.errors.SettingsError
+        More vehicles than targets, or a layer over ``--max-agl`` or under ``--clearance``.
+    """
     stages = stages or Stages(None)
     stages.say("reading targets")
     site = read_site(dem_path, targets_path, settings)
@@ -186,6 +223,17 @@ def plan_fleet(
         The vehicles and their separation.
     progress
         Called with a short message as each stage starts.
+
+    Returns
+    -------
+    FleetPlan
+        Every vehicle's plan, the fleet's makespan bound and the vehicles' separation.
+
+    Raises
+    ------
+    urpt_gcs.errors.SettingsError
+        A solver that places its own stops, a vehicle left nothing to photograph, or
+        vehicles that no start delay keeps apart.
     """
     stages = Stages(progress)
     problem = fleet_problem(dem_path, targets_path, settings, fleet, stages)

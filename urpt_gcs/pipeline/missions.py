@@ -44,7 +44,23 @@ from urpt_gcs.visibility.cover import cover_sets
 
 @dataclass(frozen=True, slots=True)
 class CheckedFlight:
-    """The tour cut into sorties and written as missions, checked as written."""
+    """The tour cut into sorties and written as missions, checked as written.
+
+    Attributes
+    ----------
+    stop_names
+        Each stop as messages name it (``stop 3 (viewpoint for T4+T7)``).
+    sorties
+        The tour's sorties, each from home and back.
+    missions
+        Each sortie's mission as written.
+    legs
+        Every leg of every mission, with its clearance over the terrain.
+    geofence_latlon
+        The geofence polygon, (lat, lon) degrees.
+    warnings
+        What the checks found that does not refuse the plan.
+    """
 
     stop_names: list[str]
     sorties: tuple[Sortie, ...]

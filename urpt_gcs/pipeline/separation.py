@@ -76,13 +76,26 @@ class Track:
     airborne: npt.NDArray[np.bool_]
 
     def shifted(self, delay_s: float) -> Track:
+        """The same track started ``delay_s`` later."""
         return Track(self.t_s + delay_s, self.xyz, self.airborne)
 
 
 def track(plan: Plan) -> Track:
     """The plan's tracks as the flight-time model flies them: on the ground until the
     take-off starts, straight up to the plane, each leg at the time the model gives it, a
-    hold at each stop, home, down, and on the ground until the disarm; sorties back to back."""
+    hold at each stop, home, down, and on the ground until the disarm; sorties back to back.
+
+    Parameters
+    ----------
+    plan
+        A vehicle's plan.
+
+    Returns
+    -------
+    Track
+        Its position against time from its take-off command, in the plan's CRS and metres
+        above the vertical datum.
+    """
     model = plan.flight_model
     ground = plan.mission.home.amsl_m
     eye = ground + plan.altitude_rel_m
@@ -127,7 +140,21 @@ def _flying(tr: Track, t: FloatArray) -> npt.NDArray[np.bool_]:
 def closest(a: Track, b: Track, horizontal: bool) -> tuple[float, float, FloatArray] | None:
     """The least distance (3-D, or horizontal) between two tracks while both fly, exact for
     their piecewise-constant velocities: (distance, time, midpoint xyz), or None if they are
-    never in the air together."""
+    never in the air together.
+
+    Parameters
+    ----------
+    a, b
+        The two tracks, on one clock.
+    horizontal
+        Measure in the horizontal plane only (else 3-D).
+
+    Returns
+    -------
+    tuple of (float, float, FloatArray) or None
+        The least distance, when it occurs and the midpoint between the two there; None if
+        they never fly together.
+    """
     t = np.union1d(a.t_s, b.t_s)
     t = t[(t >= max(a.t_s[0], b.t_s[0])) & (t <= min(a.t_s[-1], b.t_s[-1]))]
     if len(t) < 2:
@@ -154,7 +181,19 @@ def closest(a: Track, b: Track, horizontal: bool) -> tuple[float, float, FloatAr
 
 
 def timing_slack_s(a: Track, b: Track) -> float:
-    """How far early or late one vehicle of a pair may run against the other."""
+    """How far early or late one vehicle of a pair may run against the other.
+
+    Parameters
+    ----------
+    a, b
+        The pair's tracks.
+
+    Returns
+    -------
+    float
+        Seconds: :data:`TIMING_SLACK_S` or :data:`TIMING_SLACK_SHARE` of the longer flight,
+        whichever is larger.
+    """
     longest = max(a.t_s[-1] - a.t_s[0], b.t_s[-1] - b.t_s[0])
     return max(TIMING_SLACK_S, TIMING_SLACK_SHARE * float(longest))
 
@@ -162,7 +201,21 @@ def timing_slack_s(a: Track, b: Track) -> float:
 def pair_closest(tracks: Sequence[Track], i: int, j: int) -> Closest | None:
     """The pair's closest approach, the least over ``j`` running early or late against ``i``
     by up to :func:`timing_slack_s` (each shift's approach exact, the shifts in steps of
-    :data:`TIMING_STEP_S`); its time is on ``i``'s clock."""
+    :data:`TIMING_STEP_S`); its time is on ``i``'s clock.
+
+    Parameters
+    ----------
+    tracks
+        Every vehicle's track, each with its start delay.
+    i, j
+        The pair, as indices into ``tracks``.
+
+    Returns
+    -------
+    Closest or None
+        The least 3-D and least horizontal distance over the shifts (vehicles numbered from
+        1), or None if the two never fly together.
+    """
     a, b = tracks[i], tracks[j]
     slack = timing_slack_s(a, b)
     steps = math.ceil(slack / TIMING_STEP_S)
@@ -202,6 +255,25 @@ def separate(plans: Sequence[Plan], fleet: FleetSettings, crs: pyproj.CRS) -> Se
     rounding; horizontal in time mode), with either running early or late by up to
     :func:`timing_slack_s`. None up to :data:`MAX_DELAY_SHARE` of the longest
     flight in any order: refused, naming the pair, where and when.
+
+    Parameters
+    ----------
+    plans
+        Every vehicle's plan, in vehicle order.
+    fleet
+        The fleet's settings: separation mode, layer spacing and least distance.
+    crs
+        The planning CRS the plans share, to give the closest approach in lat/lon.
+
+    Returns
+    -------
+    Separation
+        Each vehicle's start delay and the closest approach they leave.
+
+    Raises
+    ------
+    urpt_gcs.errors.SettingsError
+        No start delays up to the cap keep every pair apart.
     """
     base = [track(p) for p in plans]
     horizontal = fleet.separation == "time"

@@ -309,3 +309,12 @@ def _geojson(plan_features: list[_Feature]) -> str:
             }
         )
     return json.dumps({"type": "FeatureCollection", "features": features}, indent=1) + "\n"
+
+
+__all__ = [
+    "KML_NS",
+    "fleet_geojson",
+    "fleet_kml",
+    "plan_geojson",
+    "plan_kml",
+]
