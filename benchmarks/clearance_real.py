@@ -26,7 +26,8 @@ from independent import leg_clearances, load_raster, read_waypoints_file  # noqa
 from test_plan import REAL_CASES, _valid_targets  # noqa: E402
 
 from urpt_gcs.files.products import write_products  # noqa: E402
-from urpt_gcs.pipeline.planner import Plan, plan  # noqa: E402
+from urpt_gcs.pipeline.planner import plan  # noqa: E402
+from urpt_gcs.pipeline.result import Plan  # noqa: E402
 from urpt_gcs.pipeline.settings import PlanSettings  # noqa: E402
 from urpt_gcs.solvers import SolveSettings  # noqa: E402
 

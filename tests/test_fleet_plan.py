@@ -18,7 +18,7 @@ from independent import check_mission, load_raster, read_waypoints_file
 from test_plan import _valid_targets
 
 from urpt_gcs.cli import main
-from urpt_gcs.pipeline.fleet import Track, _pair_closest, closest, timing_slack_s
+from urpt_gcs.pipeline.separation import Track, closest, pair_closest, timing_slack_s
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.problem.instance import Geometry, Instance
 from urpt_gcs.site.targets import read_targets
@@ -193,7 +193,7 @@ def test_closest_approach_holds_with_either_vehicle_early_or_late(seed: int) -> 
     # or late; dense samples of the shifts and of the time find nothing closer.
     rng = np.random.default_rng(100 + seed)
     a, b = _random_track(rng, 0.0), _random_track(rng, rng.uniform(0.0, 30.0))
-    found = _pair_closest([a, b], 0, 1)
+    found = pair_closest([a, b], 0, 1)
     slack = timing_slack_s(a, b)
     assert slack >= 10.0
     least = math.inf
@@ -365,8 +365,8 @@ def test_track_follows_the_plan_through_every_stop_in_the_planned_time() -> None
     """Sorties back to back: the track's length in time is the plan's flight time (summed by
     the sortie splitter), it passes over every stop at the plane and starts and ends on the
     ground at home."""
-    from urpt_gcs.pipeline.fleet import track
     from urpt_gcs.pipeline.planner import plan
+    from urpt_gcs.pipeline.separation import track
     from urpt_gcs.pipeline.settings import PlanSettings
 
     settings = PlanSettings(solve=SolveSettings(time_limit_s=0.5), endurance_min=4.0)

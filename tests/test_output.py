@@ -16,7 +16,8 @@ from urpt_gcs.cli import main
 from urpt_gcs.errors import OutputError
 from urpt_gcs.files.output import check_file, check_folder, commit
 from urpt_gcs.files.products import check_extra, check_out, write_products
-from urpt_gcs.pipeline.planner import Plan, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.solvers import SolveSettings
 

@@ -21,7 +21,8 @@ from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError
 from urpt_gcs.files.products import write_products
 from urpt_gcs.flight.sorties import order_sorties
-from urpt_gcs.pipeline.planner import Plan, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.problem.flight_time import FlightModel, split_sorties
 from urpt_gcs.site.targets import read_targets

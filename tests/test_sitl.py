@@ -263,7 +263,7 @@ def test_a_leg_takes_what_the_estimate_charges(east_m: float) -> None:
     simulator and in the plan's flight model. The simulator arms and starts at once and
     holds on arrival, so the estimate's start and its settling at a stop are left out."""
     from urpt_gcs.flight.mission import GeoPoint, MissionSettings, build_mission
-    from urpt_gcs.pipeline.planner import flight_model
+    from urpt_gcs.pipeline.missions import flight_model
     from urpt_gcs.pipeline.settings import PlanSettings
 
     home = GeoPoint(47.3977420, 8.5455940, 488.0)

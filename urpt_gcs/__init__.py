@@ -22,7 +22,8 @@ configure_numba_cache()
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
-    from urpt_gcs.pipeline.planner import Plan, plan
+    from urpt_gcs.pipeline.planner import plan
+    from urpt_gcs.pipeline.result import Plan
     from urpt_gcs.pipeline.settings import PlanSettings
 
 __all__ = ["Plan", "PlanSettings", "UrptError", "__version__", "plan"]

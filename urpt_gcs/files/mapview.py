@@ -24,7 +24,7 @@ from matplotlib.transforms import Affine2D
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.files.report import flight_quality, flown_stops, sortie_colour
 from urpt_gcs.flight.mission import waypoint_positions
-from urpt_gcs.pipeline.planner import Plan
+from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.site.dem import WGS84
 from urpt_gcs.site.terrain import Terrain
 
@@ -409,3 +409,13 @@ def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
     fig.tight_layout()
     return fig
+
+
+__all__ = [
+    "fleet_figure",
+    "frame_footprints",
+    "map_figure",
+    "render_fleet_map",
+    "render_map",
+    "sortie_routes",
+]

@@ -28,7 +28,7 @@ from urpt_gcs.files.formats.geo import plan_geojson, plan_kml
 from urpt_gcs.files.formats.qgc_plan import ReplayCheck
 from urpt_gcs.files.output import Destination, check_file, check_folder, commit
 from urpt_gcs.files.report import summary
-from urpt_gcs.pipeline.planner import Plan
+from urpt_gcs.pipeline.result import Plan
 
 SUMMARY_FILE = "summary.json"
 MAP_FILE = "map.png"
@@ -153,3 +153,16 @@ def write_products(
     data, files = render_products(plan, destination.folder, with_map)
     commit([(destination, files), *also])
     return data
+
+
+__all__ = [
+    "MAP_FILE",
+    "PRODUCT_NAMES",
+    "SUMMARY_FILE",
+    "check_extra",
+    "check_out",
+    "mission_stems",
+    "render_products",
+    "replay_checks",
+    "write_products",
+]

@@ -11,7 +11,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.bound.certificate import PROVEN_GAP
 from urpt_gcs.flight.mission import Mission, photo_headings
-from urpt_gcs.pipeline.planner import Plan
+from urpt_gcs.pipeline.result import Plan
 
 
 def _round(x: float, digits: int = 2) -> float | None:
@@ -456,3 +456,14 @@ def summary_text(data: dict[str, Any]) -> str:
     if data["files"]:
         lines.append("files          " + "\n               ".join(data["files"]))
     return "\n".join(lines)
+
+
+__all__ = [
+    "SORTIE_COLOURS",
+    "FlownStop",
+    "flight_quality",
+    "flown_stops",
+    "sortie_colour",
+    "summary",
+    "summary_text",
+]

@@ -17,16 +17,16 @@ import math
 import multiprocessing
 import os
 import time
-from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.pipeline.planner import Plan, plan
+from urpt_gcs.pipeline.planner import plan
+from urpt_gcs.pipeline.result import AltitudePoint, AltitudeSweep, Plan
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.progress import Progress
 
 # Altitudes planned by default, the lowest and highest included.
 DEFAULT_STEPS = 6
@@ -34,29 +34,22 @@ DEFAULT_STEPS = 6
 _GSD_MARGIN_M = 0.5
 
 
-@dataclass(frozen=True, slots=True)
-class AltitudePoint:
-    """One altitude of the sweep: what its plan flies, or why there is no plan."""
-
-    altitude_m: float
-    tour_length_m: float | None
-    flight_time_s: float | None
-    wall_s: float
-    error: str = ""
-
-
-@dataclass(frozen=True, slots=True)
-class AltitudeSweep:
-    """Every altitude planned, in ascending order, and the one kept."""
-
-    points: tuple[AltitudePoint, ...]
-    best_altitude_m: float
-    wall_s: float
-
-
 def altitude_range(probe: Plan, steps: int) -> list[float]:
     """The altitudes to plan, from the lowest plane ``probe`` (planned at ``--clearance``)
-    to the highest ``--max-agl`` and ``--gsd`` allow, ``steps`` of them, to the centimetre."""
+    to the highest ``--max-agl`` and ``--gsd`` allow, ``steps`` of them, to the centimetre.
+
+    Parameters
+    ----------
+    probe
+        The plan at the lowest plane a plan accepts.
+    steps
+        How many altitudes, the lowest and highest included.
+
+    Returns
+    -------
+    list of float
+        The altitudes, ascending; only the lowest when no higher plane is allowed.
+    """
     settings = probe.settings
     low = probe.camera.altitude_m
     base = min(probe.home_ground_m, float(np.min(probe.ground_m)))
@@ -90,7 +83,7 @@ def best_altitude(
     settings: PlanSettings,
     steps: int = DEFAULT_STEPS,
     processes: int | None = None,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
 ) -> Plan:
     """Plan at ``steps`` altitudes and return the plan with the shortest flight time, its
     ``altitude_sweep`` holding the whole curve.
@@ -144,3 +137,6 @@ def best_altitude(
         )
     sweep = AltitudeSweep(tuple(points), best.altitude_m, time.perf_counter() - started)
     return dataclasses.replace(kept, altitude_sweep=sweep)
+
+
+__all__ = ["DEFAULT_STEPS", "altitude_range", "best_altitude"]

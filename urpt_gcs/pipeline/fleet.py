@@ -6,44 +6,41 @@ the first layer plus ``(k - 1) * --layer-spacing``), so its DEM window, visibili
 and viewpoints are its own (the camera cone's footprint grows with altitude). The targets are
 shared out by :func:`urpt_gcs.solvers.fleet.solve_fleet`; each vehicle's share then goes
 through the rest of the single-vehicle chain (margins, sorties, missions checked as written),
-so every vehicle's plan is an ordinary :class:`~urpt_gcs.pipeline.planner.Plan`.
+so every vehicle's plan is an ordinary :class:`~urpt_gcs.pipeline.result.Plan`.
 
-Separation: in altitude mode the layers keep the vehicles apart once at altitude; in time mode
-(``--separation time``) all fly one layer. Either way the planned tracks (every vehicle takes
-off at its start time, flies at its planned speeds and holds at its stops) are checked at every
-instant while both are in the air, and a vehicle whose track comes too close to an earlier
-one's starts later (whole steps of :data:`DELAY_STEP_S`); the summary states each start delay
-and the planned closest approach.
+Separation (:mod:`~urpt_gcs.pipeline.separation`): in altitude mode the layers keep the
+vehicles apart once at altitude; in time mode (``--separation time``) all fly one layer. Either
+way the planned tracks are checked at every instant while both are in the air, and a vehicle
+whose track comes too close to an earlier one's starts later; the summary states each start
+delay and the planned closest approach.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.pipeline.planner import (
-    Plan,
-    _altitude_rel,
-    _Area,
-    _latlon,
-    _read_area,
-    _read_site,
-    _Site,
-    _Stages,
-    _xy,
-    finish_plan,
-    flight_model,
+from urpt_gcs.pipeline.area import (
+    PlanArea,
+    SiteInputs,
+    altitude_rel,
+    latlon_to_xy,
+    read_area,
+    read_site,
 )
-from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, SeparationMode, VehicleSpec
+from urpt_gcs.pipeline.missions import flight_model
+from urpt_gcs.pipeline.planner import finish_plan
+from urpt_gcs.pipeline.result import Plan
+from urpt_gcs.pipeline.separation import Separation, separate
+from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, VehicleSpec
+from urpt_gcs.pipeline.stages import Stages
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
 from urpt_gcs.site.targets import TargetSet
@@ -60,46 +57,6 @@ from urpt_gcs.solvers.fleet import (
 from urpt_gcs.solvers.fleet_bound import MakespanBound, makespan_bound
 from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
-
-# Start delays are searched in whole steps of this, up to the undelayed makespan.
-DELAY_STEP_S = 5.0
-# A vehicle keeps its planned timing only so well (a real copter flew the demo 3 % faster
-# than the flight-time model): separation must hold with either vehicle of a pair up to
-# this much early or late against the other -- the larger of a fixed time and a share of
-# the longer flight -- tried in steps of TIMING_STEP_S.
-TIMING_SLACK_S = 10.0
-TIMING_SLACK_SHARE = 0.05
-TIMING_STEP_S = 1.0
-# The longest start delay, as a share of the longest flight; beyond it the plan is refused.
-MAX_DELAY_SHARE = 0.5
-# Each vehicle's written altitude is rounded to whole centimetres (home down, height up): the
-# layers as written may come this much closer than the spacing asked for.
-_WRITTEN_ROUNDING_M = 0.05
-
-
-@dataclass(frozen=True, slots=True)
-class Closest:
-    """The closest two vehicles come while both are in the air."""
-
-    distance_m: float
-    horizontal_m: float
-    vehicles: tuple[int, int]
-    at_s: float
-    where_xy: tuple[float, float]
-
-
-@dataclass(frozen=True, slots=True)
-class Separation:
-    """How the vehicles are kept apart, and how close they come as planned."""
-
-    mode: SeparationMode
-    layer_spacing_m: float
-    min_m: float
-    start_delays_s: tuple[float, ...]
-    closest: Closest | None
-    closest_latlon: tuple[float, float] | None
-    closest_horizontal_m: float | None
-    timing_slack_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,6 +83,7 @@ class FleetPlan:
 
     @property
     def makespan_s(self) -> float:
+        """When the last vehicle has landed, from the first take-off."""
         return max(self.finish_s)
 
     @property
@@ -136,12 +94,26 @@ class FleetPlan:
 
 
 @dataclass(frozen=True, slots=True)
-class _Layer:
-    """One vehicle's settings, site, area, regions and instance."""
+class VehicleLayer:
+    """One vehicle's settings, site, area, regions and instance.
+
+    Attributes
+    ----------
+    settings
+        The plan's settings with this vehicle's home, altitude, endurance and speed.
+    site
+        The site with this vehicle's home.
+    area
+        The DEM window and the flight plane of its layer.
+    regions
+        Each target's visibility region from its layer.
+    instance
+        Its viewpoints and what each sees, from its home.
+    """
 
     settings: PlanSettings
-    site: _Site
-    area: _Area
+    site: SiteInputs
+    area: PlanArea
     regions: tuple[Region, ...]
     instance: Instance
 
@@ -153,8 +125,8 @@ class FleetProblem:
     first vehicle's home: what a lower eye sees, the eye above it sees too, so its stops
     serve every layer) and the widest (the highest layer's), whose bound holds for all."""
 
-    site: _Site
-    layers: tuple[_Layer, ...]
+    site: SiteInputs
+    layers: tuple[VehicleLayer, ...]
     vehicles: tuple[Vehicle, ...]
     reference: Instance
     widest: Instance
@@ -183,12 +155,34 @@ def fleet_problem(
     targets_path: Path,
     settings: PlanSettings,
     fleet: FleetSettings,
-    stages: _Stages | None = None,
+    stages: Stages | None = None,
 ) -> FleetProblem:
-    """Read the site and build every vehicle's layer, regions and viewpoints."""
-    stages = stages or _Stages(None)
+    """Read the site and build every vehicle's layer, regions and viewpoints.
+
+    Parameters
+    ----------
+    dem_path, targets_path, settings
+        As for :func:`urpt_gcs.pipeline.planner.plan`; ``settings`` gives every vehicle's
+        defaults.
+    fleet
+        The vehicles and their separation.
+    stages
+        Announces each stage and keeps its time (None: silently).
+
+    Returns
+    -------
+    FleetProblem
+        Every vehicle's layer, the vehicles as the fleet's search sees them, and the reference
+        and widest instances.
+
+    Raises
+    ------
+    urpt_gcs.errors.SettingsError
+        More vehicles than targets, or a layer over ``--max-agl`` or under ``--clearance``.
+    """
+    stages = stages or Stages(None)
     stages.say("reading targets")
-    site = _read_site(dem_path, targets_path, settings)
+    site = read_site(dem_path, targets_path, settings)
     stages.lap("targets")
     if len(fleet.vehicles) > len(site.names):
         raise SettingsError(
@@ -202,7 +196,7 @@ def fleet_problem(
         Vehicle(
             layer.instance,
             flight_model(layer.settings),
-            _altitude_rel(layer.area),
+            altitude_rel(layer.area),
             None if layer.settings.endurance_min is None else layer.settings.endurance_min * 60.0,
         )
         for layer in layers
@@ -230,8 +224,19 @@ def plan_fleet(
         The vehicles and their separation.
     progress
         Called with a short message as each stage starts.
+
+    Returns
+    -------
+    FleetPlan
+        Every vehicle's plan, the fleet's makespan bound and the vehicles' separation.
+
+    Raises
+    ------
+    urpt_gcs.errors.SettingsError
+        A solver that places its own stops, a vehicle left nothing to photograph, or
+        vehicles that no start delay keeps apart.
     """
-    stages = _Stages(progress)
+    stages = Stages(progress)
     problem = fleet_problem(dem_path, targets_path, settings, fleet, stages)
     layers, vehicles, reference = problem.layers, list(problem.vehicles), problem.reference
     solver = choose(reference, settings.solver)
@@ -266,7 +271,7 @@ def plan_fleet(
     bound = makespan_bound(vehicles, problem.single_bound_m)
     plans = tuple(_vehicle_plan(k, layer, tours, solver, stages) for k, layer in enumerate(layers))
     stages.say("checking separation along the planned tracks")
-    separation = _separate(plans, fleet, problem.site)
+    separation = separate(plans, fleet, problem.site.crs)
     stages.lap("separation")
     result = FleetPlan(
         settings=settings,
@@ -308,11 +313,13 @@ def _vehicle_settings(
     )
 
 
-def _vehicle_site(site: _Site, settings: PlanSettings, number: int, fleet: FleetSettings) -> _Site:
+def _vehicle_site(
+    site: SiteInputs, settings: PlanSettings, number: int, fleet: FleetSettings
+) -> SiteInputs:
     if settings.home is None:
         return site
     lat, lon = settings.home
-    xy = _xy(site.crs, [(lat, lon)])[0]
+    xy = latlon_to_xy(site.crs, [(lat, lon)])[0]
     return dataclasses.replace(
         site,
         home_lat_lon=(lat, lon),
@@ -324,8 +331,8 @@ def _vehicle_site(site: _Site, settings: PlanSettings, number: int, fleet: Fleet
 
 
 def _layers(
-    site: _Site, settings: PlanSettings, fleet: FleetSettings, stages: _Stages
-) -> list[_Layer]:
+    site: SiteInputs, settings: PlanSettings, fleet: FleetSettings, stages: Stages
+) -> list[VehicleLayer]:
     """Every vehicle's flight plane, DEM window, regions and viewpoints.
 
     Without ``--altitude`` the first layer is the single plan's (``--clearance`` over the
@@ -337,7 +344,7 @@ def _layers(
     stages.say("reading terrain")
     given = specs[0].altitude_m if specs[0].altitude_m is not None else settings.altitude_m
     first = _vehicle_settings(settings, specs[0], given)
-    base = _read_area(_vehicle_site(site, first, 1, fleet), first).camera.altitude_m
+    base = read_area(_vehicle_site(site, first, 1, fleet), first).camera.altitude_m
 
     def wanted(k: int, base_m: float) -> float:
         given = specs[k].altitude_m
@@ -348,7 +355,7 @@ def _layers(
         for k, spec in enumerate(specs):
             s = _vehicle_settings(settings, spec, wanted(k, base))
             areas.append((s, _vehicle_site(site, s, k + 1, fleet)))
-        read = [(s, v, _read_area(v, s)) for s, v in areas]
+        read = [(s, v, read_area(v, s)) for s, v in areas]
         if settings.altitude_m is not None:
             break
         # The first layer each layer planned from --clearance asks for over its own window.
@@ -363,7 +370,7 @@ def _layers(
     stages.lap("terrain")
     for k, (s, _, a) in enumerate(read):
         _check_layer(k + 1, s, a, settings, fleet)
-    out: list[_Layer] = []
+    out: list[VehicleLayer] = []
     for k, (s, v, a) in enumerate(read):
         stages.say(f"visibility of {len(site.names)} targets for vehicle {k + 1}")
         same = next(
@@ -371,7 +378,7 @@ def _layers(
             None,
         )
         if same is not None:
-            out.append(_Layer(s, v, a, same.regions, with_home(same.instance, v.home_xy)))
+            out.append(VehicleLayer(s, v, a, same.regions, with_home(same.instance, v.home_xy)))
             continue
         regions = visibility_regions(
             a.terrain, v.targets_xy, a.ground_m, a.camera, s.samples, s.workers
@@ -386,13 +393,13 @@ def _layers(
             a.terrain_max_m,
             s.workers,
         )
-        out.append(_Layer(s, v, a, regions, instance))
+        out.append(VehicleLayer(s, v, a, regions, instance))
     stages.lap("viewpoints")
     return out
 
 
 def _check_layer(
-    number: int, s: PlanSettings, area: _Area, settings: PlanSettings, fleet: FleetSettings
+    number: int, s: PlanSettings, area: PlanArea, settings: PlanSettings, fleet: FleetSettings
 ) -> None:
     """Refuse a layer over ``--max-agl`` above its home, or (planned from ``--clearance``)
     under the clearance over the terrain its cones reach."""
@@ -419,7 +426,9 @@ def _check_layer(
             )
 
 
-def _vehicle_plan(k: int, layer: _Layer, tours: FleetTours, solver: str, stages: _Stages) -> Plan:
+def _vehicle_plan(
+    k: int, layer: VehicleLayer, tours: FleetTours, solver: str, stages: Stages
+) -> Plan:
     """Vehicle ``k``'s share as an ordinary plan over its own targets."""
     targets = list(tours.targets[k])
     sub, kept = restrict(layer.instance, targets)
@@ -443,7 +452,7 @@ def _vehicle_plan(k: int, layer: _Layer, tours: FleetTours, solver: str, stages:
     sub_area = dataclasses.replace(layer.area, ground_m=layer.area.ground_m[idx])
     regions = tuple(dataclasses.replace(layer.regions[i], target=j) for j, i in enumerate(targets))
     stages.say(f"checking vehicle {k + 1}'s missions")
-    return finish_plan(sub_site, sub_area, regions, sub, tour, layer.settings, _Stages(None))
+    return finish_plan(sub_site, sub_area, regions, sub, tour, layer.settings, Stages(None))
 
 
 def _counted_once(tour: Tour, targets_xy: FloatArray) -> Tour:
@@ -462,265 +471,10 @@ def _counted_once(tour: Tour, targets_xy: FloatArray) -> Tour:
     return dataclasses.replace(tour, sees=sees)
 
 
-# ---- tracks and separation -------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Track:
-    """A vehicle's planned position against time: breakpoints ``t_s`` (from its take-off
-    command), positions ``xyz`` between which it moves at constant velocity, and whether it
-    is in the air on each interval."""
-
-    t_s: FloatArray
-    xyz: FloatArray
-    airborne: npt.NDArray[np.bool_]
-
-    def shifted(self, delay_s: float) -> Track:
-        return Track(self.t_s + delay_s, self.xyz, self.airborne)
-
-
-def track(plan: Plan) -> Track:
-    """The plan's tracks as the flight-time model flies them: on the ground until the
-    take-off starts, straight up to the plane, each leg at the time the model gives it, a
-    hold at each stop, home, down, and on the ground until the disarm; sorties back to back."""
-    model = plan.flight_model
-    ground = plan.mission.home.amsl_m
-    eye = ground + plan.altitude_rel_m
-    hx, hy = plan.home_xy
-    assert plan.tour.points_xy is not None
-    times = [0.0]
-    points = [(hx, hy, ground)]
-    air: list[bool] = []
-
-    def go(duration_s: float, to: tuple[float, float, float], flying: bool) -> None:
-        times.append(times[-1] + max(duration_s, 0.0))
-        points.append(to)
-        air.append(flying)
-
-    climb = model.takeoff_s(plan.altitude_rel_m) - model.start_s
-    down = model.landing_s(plan.altitude_rel_m) - model.touchdown_s
-    for sortie in plan.sorties:
-        go(model.start_s, (hx, hy, ground), False)
-        go(climb, (hx, hy, eye), True)
-        here = (hx, hy)
-        for x, y in plan.tour.points_xy[sortie.first : sortie.stop].tolist():
-            go(float(model.leg_s(math.hypot(x - here[0], y - here[1]))), (x, y, eye), True)
-            go(model.stop_s, (x, y, eye), True)
-            here = (x, y)
-        go(float(model.return_s(math.hypot(hx - here[0], hy - here[1]))), (hx, hy, eye), True)
-        go(down, (hx, hy, ground), True)
-        go(model.touchdown_s, (hx, hy, ground), False)
-    return Track(np.asarray(times), np.asarray(points, dtype=np.float64), np.asarray(air))
-
-
-def _at(tr: Track, t: FloatArray) -> FloatArray:
-    return np.column_stack([np.interp(t, tr.t_s, tr.xyz[:, i]) for i in range(3)])
-
-
-def _flying(tr: Track, t: FloatArray) -> npt.NDArray[np.bool_]:
-    i = np.searchsorted(tr.t_s, t, side="right") - 1
-    inside = (i >= 0) & (i < len(tr.airborne))
-    out: npt.NDArray[np.bool_] = inside & tr.airborne[np.clip(i, 0, len(tr.airborne) - 1)]
-    return out
-
-
-def closest(a: Track, b: Track, horizontal: bool) -> tuple[float, float, FloatArray] | None:
-    """The least distance (3-D, or horizontal) between two tracks while both fly, exact for
-    their piecewise-constant velocities: (distance, time, midpoint xyz), or None if they are
-    never in the air together."""
-    t = np.union1d(a.t_s, b.t_s)
-    t = t[(t >= max(a.t_s[0], b.t_s[0])) & (t <= min(a.t_s[-1], b.t_s[-1]))]
-    if len(t) < 2:
-        return None
-    mid = 0.5 * (t[:-1] + t[1:])
-    both = _flying(a, mid) & _flying(b, mid)
-    if not both.any():
-        return None
-    pa, pb = _at(a, t), _at(b, t)
-    r = pa - pb
-    if horizontal:
-        r[:, 2] = 0.0
-    r0, r1 = r[:-1][both], r[1:][both]
-    dr = r1 - r0
-    den = np.einsum("ij,ij->i", dr, dr)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.where(den > 0.0, np.clip(-np.einsum("ij,ij->i", r0, dr) / den, 0.0, 1.0), 0.0)
-    gap = np.linalg.norm(r0 + s[:, None] * dr, axis=1)
-    i = int(np.argmin(gap))
-    t0, t1 = t[:-1][both][i], t[1:][both][i]
-    when = float(t0 + s[i] * (t1 - t0))
-    where = 0.5 * (_at(a, np.array([when]))[0] + _at(b, np.array([when]))[0])
-    return float(gap[i]), when, where
-
-
-def timing_slack_s(a: Track, b: Track) -> float:
-    """How far early or late one vehicle of a pair may run against the other."""
-    longest = max(a.t_s[-1] - a.t_s[0], b.t_s[-1] - b.t_s[0])
-    return max(TIMING_SLACK_S, TIMING_SLACK_SHARE * float(longest))
-
-
-def _pair_closest(tracks: Sequence[Track], i: int, j: int) -> Closest | None:
-    """The pair's closest approach, the least over ``j`` running early or late against ``i``
-    by up to :func:`timing_slack_s` (each shift's approach exact, the shifts in steps of
-    :data:`TIMING_STEP_S`); its time is on ``i``'s clock."""
-    a, b = tracks[i], tracks[j]
-    slack = timing_slack_s(a, b)
-    steps = math.ceil(slack / TIMING_STEP_S)
-    best: Closest | None = None
-    for shift in np.linspace(-slack, slack, 2 * steps + 1):
-        moved = b.shifted(float(shift))
-        full = closest(a, moved, horizontal=False)
-        if full is None:
-            continue
-        flat = closest(a, moved, horizontal=True)
-        assert flat is not None
-        if best is not None and full[0] >= best.distance_m and flat[0] >= best.horizontal_m:
-            continue
-        found = Closest(
-            full[0], flat[0], (i + 1, j + 1), full[1], (float(full[2][0]), float(full[2][1]))
-        )
-        if best is None:
-            best = found
-        else:
-            # The least of each measure over the shifts (3-D and horizontal apart).
-            best = Closest(
-                min(best.distance_m, found.distance_m),
-                min(best.horizontal_m, found.horizontal_m),
-                best.vehicles,
-                found.at_s if found.distance_m < best.distance_m else best.at_s,
-                found.where_xy if found.distance_m < best.distance_m else best.where_xy,
-            )
-    return best
-
-
-def _separate(plans: Sequence[Plan], fleet: FleetSettings, site: _Site) -> Separation:
-    """Start delays that keep every pair apart, and the closest approach they leave.
-
-    Vehicles are taken in turn (:func:`_delays`, for a few orders of take-off); each starts
-    at the first step of :data:`DELAY_STEP_S` at which its track stays ``min_m`` from every
-    earlier one's while both fly (3-D in altitude mode, less the written altitudes'
-    rounding; horizontal in time mode), with either running early or late by up to
-    :func:`timing_slack_s`. None up to :data:`MAX_DELAY_SHARE` of the longest
-    flight in any order: refused, naming the pair, where and when.
-    """
-    base = [track(p) for p in plans]
-    horizontal = fleet.separation == "time"
-    need = fleet.min_m - (0.0 if horizontal else _WRITTEN_ROUNDING_M)
-    # A vehicle held back longer than half the longest flight is all but flying in turn.
-    cap = MAX_DELAY_SHARE * max(p.flight_time_s for p in plans)
-    # Who takes off first changes the delays: the vehicles in turn as numbered (lowest layer
-    # first), the longest flight first, and the highest layer first; the earliest last
-    # landing is kept, the first refusal raised if every order is refused.
-    count = len(plans)
-    turns = [
-        list(range(count)),
-        sorted(range(count), key=lambda k: -plans[k].flight_time_s),
-        list(range(count - 1, -1, -1)),
-    ]
-    best: list[float] | None = None
-    refused: SettingsError | None = None
-    for turn in turns:
-        try:
-            delays = _delays(base, turn, need, cap, horizontal, fleet, site)
-        except SettingsError as exc:
-            refused = refused or exc
-            continue
-        finish = max(d + p.flight_time_s for d, p in zip(delays, plans, strict=True))
-        if best is None or finish < max(
-            d + p.flight_time_s for d, p in zip(best, plans, strict=True)
-        ):
-            best = delays
-    if best is None:
-        assert refused is not None
-        raise refused
-    delays = best
-    tracks = [b.shifted(d) for b, d in zip(base, delays, strict=True)]
-    found = [
-        c
-        for i in range(len(tracks))
-        for j in range(i + 1, len(tracks))
-        if (c := _pair_closest(tracks, i, j)) is not None
-    ]
-    least = min(found, key=lambda c: c.distance_m, default=None)
-    flat = min((c.horizontal_m for c in found), default=None)
-    where = None if least is None else _latlon(site.crs, np.array([least.where_xy]))[0]
-    return Separation(
-        mode=fleet.separation,
-        layer_spacing_m=fleet.layer_spacing_m,
-        min_m=fleet.min_m,
-        start_delays_s=tuple(delays),
-        closest=least,
-        closest_latlon=where,
-        closest_horizontal_m=flat,
-        timing_slack_s=max(
-            (
-                timing_slack_s(tracks[i], tracks[j])
-                for i in range(len(tracks))
-                for j in range(i + 1, len(tracks))
-            ),
-            default=0.0,
-        ),
-    )
-
-
-def _delays(
-    base: list[Track],
-    turn: list[int],
-    need: float,
-    cap: float,
-    horizontal: bool,
-    fleet: FleetSettings,
-    site: _Site,
-) -> list[float]:
-    """Start delays with the vehicles taking off in the order ``turn``: each at the first
-    step of :data:`DELAY_STEP_S` that keeps it ``need`` from every vehicle before it."""
-    delays = [0.0] * len(base)
-
-    def apart(k: int, delay: float, earlier: list[int]) -> Closest | None:
-        moved = base[k].shifted(delay)
-        worst: Closest | None = None
-        for j in earlier:
-            c = _pair_closest([base[j].shifted(delays[j]), moved], 0, 1)
-            if c is None:
-                continue
-            c = dataclasses.replace(c, vehicles=(min(j, k) + 1, max(j, k) + 1))
-            value = c.horizontal_m if horizontal else c.distance_m
-            if value < need and (worst is None or value < _value(worst, horizontal)):
-                worst = c
-        return worst
-
-    for n, k in enumerate(turn[1:], start=1):
-        first = apart(k, 0.0, turn[:n])
-        delay = 0.0
-        clash = first
-        while clash is not None:
-            delay += DELAY_STEP_S
-            if delay > cap:
-                assert first is not None
-                lat, lon = _latlon(site.crs, np.array([first.where_xy]))[0]
-                what = " horizontally" if horizontal else ""
-                raise SettingsError(
-                    f"vehicles {first.vehicles[0]} and {first.vehicles[1]} come within "
-                    f"{_value(first, horizontal):.1f} m{what} of each other at "
-                    f"{first.at_s:.0f} s after take-off near {lat:.6f}, {lon:.6f}, under the "
-                    f"{fleet.min_m:g} m required, and no start delay up to {cap:.0f} s avoids "
-                    "it: give the vehicles homes further apart in --fleet, or use "
-                    "--separation altitude"
-                )
-            clash = apart(k, delay, turn[:n])
-        delays[k] = delay
-    return delays
-
-
-def _value(c: Closest, horizontal: bool) -> float:
-    return c.horizontal_m if horizontal else c.distance_m
-
-
 __all__ = [
     "FleetPlan",
-    "Separation",
-    "closest",
+    "FleetProblem",
+    "VehicleLayer",
     "fleet_problem",
     "plan_fleet",
-    "track",
 ]

@@ -28,7 +28,7 @@ import pyproj
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.files.report import flown_stops, sortie_colour
-from urpt_gcs.pipeline.planner import Plan
+from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.site.dem import WGS84
 
 KML_NS = "http://www.opengis.net/kml/2.2"
@@ -309,3 +309,12 @@ def _geojson(plan_features: list[_Feature]) -> str:
             }
         )
     return json.dumps({"type": "FeatureCollection", "features": features}, indent=1) + "\n"
+
+
+__all__ = [
+    "KML_NS",
+    "fleet_geojson",
+    "fleet_kml",
+    "plan_geojson",
+    "plan_kml",
+]

@@ -1,0 +1,182 @@
+"""Stops moved within what they see, and the certified lower bound of the flight.
+
+Both work on the terrain read so far (filled along new legs) and check every stop as the
+mission will be written: the position margin, the written grid and the legs' clearance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyproj
+
+from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.certificate import Certificate, certify
+from urpt_gcs.bound.geometric import geometric_lower_bound
+from urpt_gcs.flight.refinement import Refinement, Site, refine_along, refine_tour, written_grid
+from urpt_gcs.flight.sorties import SortieOrder
+from urpt_gcs.pipeline.area import PlanArea, SiteInputs
+from urpt_gcs.pipeline.missions import CheckedFlight, sorties_and_missions
+from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.pipeline.stages import Stages
+from urpt_gcs.problem.instance import Instance
+from urpt_gcs.site.dem import WGS84
+from urpt_gcs.site.reading import fill_along
+from urpt_gcs.solvers import Tour
+from urpt_gcs.visibility.outer import finer_stars, outer_regions
+
+# How much shorter a tour read off the bound must be to replace the refined one.
+_BETTER = 1e-6
+
+# Seconds refinement may take at most: it ends when its steps are down to a centimetre (so
+# that a plan does not depend on the machine's load), this only guards against a runaway.
+_REFINE_MAX_S = 60.0
+
+
+def refine_stops(
+    site: SiteInputs, area: PlanArea, tour: Tour, settings: PlanSettings
+) -> tuple[Tour, Refinement]:
+    """Move the stops within what they see, checked as the mission will be (the position
+    margin, the written grid and the legs' clearance).
+
+    Parameters
+    ----------
+    site, area
+        The site and the area planned on.
+    tour
+        The tour with its stops given their position margin.
+    settings
+        The plan's settings (position tolerance, least clearance, workers).
+
+    Returns
+    -------
+    tuple of (Tour, Refinement)
+        The refined tour, and its length before and after.
+    """
+    return refine_tour(_check_site(site, area, settings), tour, site.home_xy, _REFINE_MAX_S)
+
+
+def bounds_tour(
+    site: SiteInputs,
+    area: PlanArea,
+    tour: Tour,
+    certificate: Certificate,
+    settings: PlanSettings,
+    flown_m: float,
+) -> tuple[tuple[Tour, SortieOrder | None, CheckedFlight], float, float] | None:
+    """The tour read off the certified bound's relaxed tour and refined, checked as the
+    mission will be, cut into sorties and checked, with its flown and refined lengths: when
+    it is shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown; else None.
+
+    Parameters
+    ----------
+    site, area
+        The site and the area planned on.
+    tour
+        The refined tour.
+    certificate
+        The certified bound, whose relaxed tour (if any) is read.
+    settings
+        The plan's settings.
+    flown_m
+        The refined tour's length as flown, every sortie from home and back.
+
+    Returns
+    -------
+    tuple or None
+        ``((tour, sortie_order, flight), flown_m, refined_m)`` as
+        :func:`~urpt_gcs.pipeline.missions.sorties_and_missions` gives them, with the new
+        tour's length as flown and as refined; None when it is not shorter.
+    """
+    if certificate.relaxed_tour_xy is None:
+        return None
+    check = _check_site(site, area, settings)
+    read = refine_along(check, certificate.relaxed_tour_xy, site.home_xy, tour, _REFINE_MAX_S)
+    if read is None:
+        return None
+    found = read[0]
+    if found.length >= tour.length * (1.0 - _BETTER):
+        return None
+    flown = sorties_and_missions(site, area, found, settings, Stages(None))
+    other_m = math.fsum(s.length_m for s in flown[2].sorties)
+    return (flown, other_m, found.length) if other_m < flown_m else None
+
+
+def certify_flight(
+    site: SiteInputs,
+    area: PlanArea,
+    instance: Instance,
+    flown_m: float,
+    time_limit_s: float,
+    workers: int | None,
+    hold_m: float,
+) -> Certificate:
+    """The certified lower bound of every flight from home whose stops see every target from
+    anywhere within ``hold_m`` of them.
+
+    Parameters
+    ----------
+    site, area
+        The site and the area planned on.
+    instance
+        The viewpoints' instance, whose geometric bound the certificate may also use.
+    flown_m
+        The flight's length as flown.
+    time_limit_s
+        Seconds the bound may take.
+    workers
+        Worker threads (None: one per core).
+    hold_m
+        How far from its waypoint a stop still photographs (the position tolerance).
+
+    Returns
+    -------
+    Certificate
+        The lower bound and how it was proved.
+    """
+    regions, ratio = outer_regions(
+        area.terrain,
+        site.targets_xy,
+        area.ground_m,
+        area.camera,
+        site.home_xy,
+        workers=workers,
+        hold_m=hold_m,
+    )
+    also = geometric_lower_bound(instance)
+    tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
+    return certify(regions, flown_m, time_limit_s, also, ratio, tighten)
+
+
+def _check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site:
+    """What a stop is checked against: the position margin, the written grid and the legs'
+    clearance, on the terrain read so far (filled along new legs)."""
+    to_geo = pyproj.Transformer.from_crs(site.crs, WGS84, always_xy=True)
+    to_grid = pyproj.Transformer.from_crs(WGS84, site.crs, always_xy=True)
+
+    def to_latlon(xy: FloatArray) -> FloatArray:
+        lon, lat = to_geo.transform(xy[:, 0], xy[:, 1])
+        return np.column_stack([lat, lon]).astype(np.float64)
+
+    def to_xy(lat_lon: FloatArray) -> FloatArray:
+        x, y = to_grid.transform(lat_lon[:, 1], lat_lon[:, 0])
+        return np.column_stack([x, y]).astype(np.float64)
+
+    def fill(a: FloatArray, b: FloatArray) -> None:
+        fill_along(site.dem, area.terrain, a, b)
+
+    return Site(
+        terrain=area.terrain,
+        targets_xy=site.targets_xy,
+        ground_m=area.ground_m,
+        camera=area.camera,
+        tolerance_m=settings.position_tolerance_m,
+        min_clearance_m=settings.min_clearance_m,
+        written=written_grid(to_latlon, to_xy),
+        fill=fill,
+        workers=settings.workers,
+    )
+
+
+__all__ = ["bounds_tour", "certify_flight", "refine_stops"]

@@ -1,0 +1,273 @@
+"""The tour flown: cut into sorties, written as missions, and checked as written.
+
+The checks run on the missions as the vehicle will store them (positions on the 1e-7 degree
+grid, altitude in whole centimetres): every stop still sees its targets, every leg keeps its
+clearance over the terrain, and the height above ground stays within ``--max-agl``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pyproj
+
+from urpt_gcs.arrays import BoolArray, FloatArray
+from urpt_gcs.errors import PlanError
+from urpt_gcs.flight.mission import (
+    GeoPoint,
+    Mission,
+    build_mission,
+    waypoint_positions,
+)
+from urpt_gcs.flight.safety import (
+    FlightModel,
+    Leg,
+    Sortie,
+    check_height_above_ground,
+    check_legs,
+    geofence_polygon,
+    leg_clearances,
+    split_sorties,
+)
+from urpt_gcs.flight.sorties import SEARCH_SHARE, SortieOrder, order_sorties
+from urpt_gcs.pipeline.area import PlanArea, SiteInputs, altitude_rel, latlon_to_xy, xy_to_latlon
+from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.pipeline.stages import Stages
+from urpt_gcs.site.camera import true_bearing_deg
+from urpt_gcs.site.reading import fill_along
+from urpt_gcs.solvers import Tour
+from urpt_gcs.visibility.cover import cover_sets
+
+
+@dataclass(frozen=True, slots=True)
+class CheckedFlight:
+    """The tour cut into sorties and written as missions, checked as written.
+
+    Attributes
+    ----------
+    stop_names
+        Each stop as messages name it (``stop 3 (viewpoint for T4+T7)``).
+    sorties
+        The tour's sorties, each from home and back.
+    missions
+        Each sortie's mission as written.
+    legs
+        Every leg of every mission, with its clearance over the terrain.
+    geofence_latlon
+        The geofence polygon, (lat, lon) degrees.
+    warnings
+        What the checks found that does not refuse the plan.
+    """
+
+    stop_names: list[str]
+    sorties: tuple[Sortie, ...]
+    missions: tuple[Mission, ...]
+    legs: tuple[Leg, ...]
+    geofence_latlon: tuple[tuple[float, float], ...]
+    warnings: list[str]
+
+
+def sorties_and_missions(
+    site: SiteInputs, area: PlanArea, tour: Tour, settings: PlanSettings, stages: Stages
+) -> tuple[Tour, SortieOrder | None, CheckedFlight]:
+    """The tour ordered and cut into sorties, and its missions written and checked.
+
+    Parameters
+    ----------
+    site, area
+        The site and the area planned on (:func:`~urpt_gcs.pipeline.area.read_site`,
+        :func:`~urpt_gcs.pipeline.area.read_area`).
+    tour
+        The tour to fly, its stops in the planning CRS.
+    settings
+        The plan's settings: endurance, speeds, mission and check options.
+    stages
+        Announces the ordering and the checks and keeps their times.
+
+    Returns
+    -------
+    tuple of (Tour, SortieOrder or None, CheckedFlight)
+        The tour in the order flown, how its sorties were ordered, and the flight written
+        and checked.
+    """
+    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
+    budget = SEARCH_SHARE * settings.solve.time_limit_s
+    stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
+    tour, sortie_order = order_sorties(
+        tour,
+        site.home_xy,
+        altitude_rel(area),
+        flight_model(settings),
+        endurance,
+        [f"stop {k}" for k in range(1, len(tour.sees) + 1)],
+        budget,
+        settings.solve.seed,
+    )
+    stages.lap("sorties")
+    stages.say("checking the missions")
+    flight = _write_missions(site, area, tour, settings)
+    stages.lap("checks")
+    return tour, sortie_order, flight
+
+
+def _write_missions(
+    site: SiteInputs, area: PlanArea, tour: Tour, settings: PlanSettings
+) -> CheckedFlight:
+    """Cut the tour into sorties, write their missions and check them before anyone flies."""
+    if tour.points_xy is None:
+        raise PlanError(f"internal check failed: solver {tour.solver} returned no positions")
+    names = site.names
+    rel_m = altitude_rel(area)
+    stop_names = [
+        f"stop {k} ({_stop_name(row, names)})" for k, row in enumerate(tour.sees, start=1)
+    ]
+    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
+    sorties = split_sorties(
+        tour.points_xy, site.home_xy, rel_m, flight_model(settings), endurance, stop_names
+    )
+    # Home written a little low (whole centimetres, down): every check of the mission as
+    # written then measures from a height the vehicle is at or above.
+    home = GeoPoint(*site.home_lat_lon, math.floor(area.home_ground_m * 100.0) / 100.0)
+    stops_latlon = xy_to_latlon(site.crs, tour.points_xy)
+    true_headings, written_grid = _headings(site.crs, tour, sorties)
+    missions = tuple(
+        build_mission(
+            home,
+            stops_latlon[s.first : s.stop],
+            rel_m,
+            settings.mission,
+            None if true_headings is None else true_headings[s.first : s.stop].tolist(),
+        )
+        for s in sorties
+    )
+    legs = _check_as_written(
+        site, area, missions, sorties, tour.sees, stop_names, settings.workers, written_grid
+    )
+    warnings = check_legs(legs, settings.min_clearance_m)
+    stop_ground = area.terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
+    warnings += check_height_above_ground(
+        area.camera.altitude_m,
+        stop_ground,
+        stop_names,
+        area.home_ground_m,
+        settings.max_agl_m,
+        settings.strict,
+    )
+    if len(sorties) > 1:
+        warnings.append(
+            f"the tour needs {len(sorties)} sorties to fit --endurance "
+            f"{settings.endurance_min:g} min; each returns home"
+        )
+    fence_xy = geofence_polygon(
+        np.vstack([[site.home_xy], tour.points_xy, site.targets_xy]), settings.geofence_margin_m
+    )
+    return CheckedFlight(
+        stop_names, sorties, missions, legs, tuple(xy_to_latlon(site.crs, fence_xy)), warnings
+    )
+
+
+# Headings are written to the mission in hundredths of a degree.
+_HEADING_STEP_DEG = 0.01
+
+
+def _headings(
+    crs: pyproj.CRS, tour: Tour, sorties: tuple[Sortie, ...]
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """Each stop's heading as the mission gives it (true north, degrees in [0, 360)) and that
+    written heading back in the planning grid, for the checks; None for the cone.
+
+    A frame looks the same turned half a turn, so each stop takes whichever of its two
+    headings is nearer the stop before it in its sortie: the vehicle never turns more than
+    90 degrees between photos.
+    """
+    if tour.headings_deg is None or tour.points_xy is None:
+        return None, None
+    grid = np.asarray(tour.headings_deg, dtype=np.float64) % 180.0
+    for sortie in sorties:
+        for k in range(sortie.first + 1, sortie.stop):
+            turn = (grid[k] - grid[k - 1] + 180.0) % 360.0 - 180.0
+            if abs(turn) > 90.0:
+                grid[k] = (grid[k] + 180.0) % 360.0
+    true = true_bearing_deg(crs, tour.points_xy, grid)
+    written = np.round(true / _HEADING_STEP_DEG) * _HEADING_STEP_DEG % 360.0
+    back: FloatArray = grid + (written - true)
+    return written, back
+
+
+def _check_as_written(
+    site: SiteInputs,
+    area: PlanArea,
+    missions: tuple[Mission, ...],
+    sorties: tuple[Sortie, ...],
+    sees: BoolArray,
+    stop_names: list[str],
+    workers: int | None,
+    headings_deg: FloatArray | None = None,
+) -> tuple[Leg, ...]:
+    """Check the missions as the vehicle will store them, and return their legs.
+
+    Positions are the written ones (on the 1e-7 degree grid) and the altitude the written one
+    (whole centimetres above home): every stop must still see every target the plan says it
+    sees, and the legs' clearance is measured between those positions.
+    """
+    eye_m = missions[0].home.amsl_m + missions[0].altitude_rel_m
+    written_camera = dataclasses.replace(area.camera, altitude_m=eye_m)
+    legs: tuple[Leg, ...] = ()
+    stops = []
+    for sortie, mission in zip(sorties, missions, strict=True):
+        home_xy = latlon_to_xy(site.crs, [(mission.home.lat_deg, mission.home.lon_deg)])
+        at = latlon_to_xy(site.crs, waypoint_positions(mission))
+        stops.append(at)
+        path = np.vstack([home_xy, at, home_xy])
+        # The mosaic holds the cones; a leg between them crosses blocks read only now.
+        fill_along(site.dem, area.terrain, path[:-1], path[1:])
+        legs += leg_clearances(
+            area.terrain, path, ["home", *stop_names[sortie.first : sortie.stop], "home"], eye_m
+        )
+    written = np.vstack(stops)
+    seen = cover_sets(
+        area.terrain, written, site.targets_xy, area.ground_m, written_camera, workers, headings_deg
+    )
+    lost = np.argwhere(sees & ~seen)
+    if lost.size:
+        k, t = (int(v) for v in lost[0])
+        raise PlanError(
+            f"{stop_names[k]} no longer sees target '{site.names[t]}' once its position is "
+            "written to the mission's 1e-7 degree grid: it sits on the edge of what the camera "
+            "sees; widen --fov, raise --samples or change --altitude"
+        )
+    return legs
+
+
+def flight_model(settings: PlanSettings) -> FlightModel:
+    """How the flight-time estimate sees the vehicle: its firmware's model at the settings'
+    speeds.
+
+    Parameters
+    ----------
+    settings
+        The plan's settings (firmware, cruise speed, hold, climb, descent, acceleration).
+
+    Returns
+    -------
+    FlightModel
+        The model that times every leg, hold, take-off and landing of the plan.
+    """
+    make = FlightModel.arducopter if settings.mission.firmware == "ardupilot" else FlightModel.px4
+    return make(
+        cruise_m_s=settings.mission.cruise_speed_m_s,
+        hold_s=settings.mission.hold_s,
+        climb_m_s=settings.climb_m_s,
+        descent_m_s=settings.descent_m_s,
+        accel_m_s2=settings.accel_m_s2,
+    )
+
+
+def _stop_name(sees: BoolArray, names: list[str]) -> str:
+    return "viewpoint for " + "+".join(names[t] for t in np.flatnonzero(sees).tolist())
+
+
+__all__ = ["CheckedFlight", "flight_model", "sorties_and_missions"]
