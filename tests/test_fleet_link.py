@@ -27,8 +27,9 @@ from scipy.ndimage import minimum_filter1d
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.fleet_folder import read_fleet
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.replay.fleet import FleetReport, replay_fleet
-from urpt_gcs.replay.fly import Flight, ReplaySettings, free_udp_port, read_mission
+from urpt_gcs.replay.fly import Flight, ReplaySettings, free_udp_port
 from urpt_gcs.sim import SitlServer, VehicleSettings
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.vehicle.fleet_upload import upload_fleet

@@ -20,8 +20,9 @@ from simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.formats import waypoints_text
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.flight.mission import Mission
-from urpt_gcs.replay.fly import ReplaySettings, fly, read_mission, replay
+from urpt_gcs.replay.fly import ReplaySettings, fly, replay
 from urpt_gcs.sim import VehicleSettings
 from urpt_gcs.sim.events import Reached, Text
 from urpt_gcs.sim.model import Vehicle

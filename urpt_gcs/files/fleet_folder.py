@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from urpt_gcs.errors import MissionFileError
+from urpt_gcs.files.mission_file import PLAN_STEM
 
 SUMMARY_NAME = "summary.json"
 SUMMARY_MAX_BYTES = 16 * 1024 * 1024
@@ -159,8 +160,6 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
 
 
 def _missions(folder: Path) -> tuple[Path, ...]:
-    from urpt_gcs.replay.fly import PLAN_STEM
-
     if not folder.is_dir():
         return ()
     found = sorted(folder.glob("mission*.plan")) or sorted(folder.glob("mission*.waypoints"))

@@ -31,6 +31,7 @@ from scipy.ndimage import minimum_filter1d
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle, Separation
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.progress import Progress
 from urpt_gcs.replay.fly import (
@@ -41,7 +42,6 @@ from urpt_gcs.replay.fly import (
     _fly,
     estimate_wall_timeout_s,
     free_udp_port,
-    read_mission,
 )
 from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sim.server import SitlServer

@@ -23,7 +23,6 @@ import contextlib
 import itertools
 import json
 import math
-import re
 import socket
 import time
 from collections.abc import Awaitable, Callable, Sequence
@@ -41,16 +40,14 @@ from mavsdk.plugins.info import InfoError, Version
 from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
-from urpt_gcs.files.formats import read_plan, read_waypoints
-from urpt_gcs.flight.geofence import Geofence, read_plan_geofence
+from urpt_gcs.errors import LinkError, SettingsError
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.flight.mission import Mission, command_name
 from urpt_gcs.progress import Progress
 from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
 from urpt_gcs.sim.params import AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.settings import VehicleSettings
-from urpt_gcs.site.inputs import MISSION_FILE_MAX_BYTES, read_capped
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.site.terrain import open_dem
 from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload_verified
@@ -69,7 +66,6 @@ MISSION_START_TRIES = 10
 MISSION_START_RETRY_S = 0.3
 _ASK_AGAIN = (mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
 # ArduCopter arms in GUIDED once it has a position, and AUTO can take off from it.
 ARMING_MODE = mavlink.COPTER_MODE_GUIDED
 # MAVSDK asks for AUTOPILOT_VERSION itself on connecting; give the answer this long to come.
@@ -215,47 +211,6 @@ class Flight:
     sim_time_s: float
     wall_time_s: float
     vehicle: VehicleIdentity
-
-
-def read_mission(path: Path, flag: str = "--plan") -> Mission:
-    """A ``.plan`` or ``.waypoints`` file (by extension), of at most 16 MiB.
-
-    ``flag`` is where the operator gave the path, for the messages.
-    """
-    data = read_capped(
-        path,
-        "mission file",
-        flag,
-        MissionFileError,
-        MISSION_FILE_MAX_BYTES,
-        "give the mission urpt-gcs plan wrote",
-    )
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise MissionFileError(f"mission file '{path}' cannot be read: {exc}") from None
-    if path.suffix.lower() == ".waypoints":
-        return read_waypoints(text, str(path))
-    if path.suffix.lower() == ".plan":
-        return read_plan(text, str(path))
-    raise MissionFileError(
-        f"'{path}' is neither a .plan nor a .waypoints file: give the mission urpt-gcs plan wrote"
-    )
-
-
-def read_fence(path: Path) -> Geofence:
-    """The geofence of a ``.plan`` file; empty for a ``.waypoints`` file, which has none."""
-    if path.suffix.lower() != ".plan":
-        return Geofence()
-    data = read_capped(
-        path,
-        "mission file",
-        "--plan",
-        MissionFileError,
-        MISSION_FILE_MAX_BYTES,
-        "give the mission urpt-gcs plan wrote",
-    )
-    return read_plan_geofence(data.decode("utf-8", errors="replace"), str(path))
 
 
 def free_udp_port() -> int:
@@ -762,31 +717,6 @@ def replay(
     expected = expected_checks(plan_path, mission, settings.fov_deg, settings.min_clearance_m)
     flight = fly(mission, settings, progress)
     return judge(flight, mission, dem_path, targets_path, expected, str(plan_path))
-
-
-def mission_files(paths: Sequence[Path]) -> list[Path]:
-    """The mission files to replay: each file given, and for a folder its sorties'
-    ``mission*.plan`` (or, without any, its ``mission*.waypoints``) in sortie order.
-
-    Raises
-    ------
-    MissionFileError
-        If a folder holds no mission urpt-gcs wrote.
-    """
-    files: list[Path] = []
-    for path in paths:
-        if not path.is_dir():
-            files.append(path)
-            continue
-        found = sorted(path.glob("mission*.plan")) or sorted(path.glob("mission*.waypoints"))
-        found = [f for f in found if PLAN_STEM.fullmatch(f.stem)]
-        if not found:
-            raise MissionFileError(
-                f"--plan folder '{path}' holds no mission.plan or mission_N.plan: give the "
-                "--out folder of urpt-gcs plan, or the mission files"
-            )
-        files.extend(sorted(found, key=lambda f: int(f.stem.partition("_")[2] or 0)))
-    return files
 
 
 def replay_set(

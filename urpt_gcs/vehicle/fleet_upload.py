@@ -16,6 +16,7 @@ from pathlib import Path
 
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle
+from urpt_gcs.files.mission_file import read_fence, read_mission
 from urpt_gcs.flight.geofence import Geofence
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.progress import Progress
@@ -134,8 +135,6 @@ def upload_fleet(
     MissionFileError
         Before anything is sent, if a vehicle's mission file cannot be read.
     """
-    from urpt_gcs.replay.fly import read_fence, read_mission
-
     check_connections(fleet, urls, system_ids)
     if sortie < 1:
         raise SettingsError(f"--sortie {sortie} must be 1 or more")
