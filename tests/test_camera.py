@@ -27,12 +27,13 @@ from urpt_gcs.flight.mission import (
     photo_headings,
     upload_problem,
 )
+from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.sim.store import Item, ardupilot_stored
 from urpt_gcs.site.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 from urpt_gcs.visibility.regions import Camera
 
 MAV = mavutil.mavlink

@@ -33,6 +33,7 @@ from urpt_gcs.flight.mission import (
     build_mission,
     upload_problem,
 )
+from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.store import Item, ardupilot_stored, px4_stored
 from urpt_gcs.vehicle import mavsdk_link
@@ -46,7 +47,7 @@ from urpt_gcs.vehicle.link import (
     upload,
     upload_verified,
 )
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 
 WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT

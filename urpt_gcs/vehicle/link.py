@@ -41,8 +41,9 @@ from urpt_gcs.flight.mission import (
     command_name,
     upload_problem,
 )
+from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.progress import Progress
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
 READBACK_S_PER_ITEM = 1.0

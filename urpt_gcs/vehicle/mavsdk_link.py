@@ -36,6 +36,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import LinkError
 from urpt_gcs.flight.geofence import FENCE_TYPE
+from urpt_gcs.flight.wire import WireItem
 from urpt_gcs.vehicle.link import (
     DEFAULT_URL,
     AutopilotKind,
@@ -44,7 +45,6 @@ from urpt_gcs.vehicle.link import (
     MissionRejected,
     UploadUnconfirmed,
 )
-from urpt_gcs.vehicle.readback import WireItem
 
 # ArduPilot sends its explanation (STATUSTEXT) just after the MISSION_ACK.
 REFUSAL_TEXT_WAIT_S = 0.3
