@@ -37,15 +37,12 @@ from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.store import Item, ardupilot_stored, px4_stored
 from urpt_gcs.vehicle import mavsdk_link
-from urpt_gcs.vehicle.link import (
+from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload, upload_verified
+from urpt_gcs.vehicle.protocol import (
     AutopilotKind,
     LinkTimeout,
     MissionRejected,
-    UploadReport,
-    UploadSettings,
     UploadUnconfirmed,
-    upload,
-    upload_verified,
 )
 from urpt_gcs.vehicle.readback import compare
 

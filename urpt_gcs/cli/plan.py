@@ -16,7 +16,7 @@ from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.site.camera import CAMERAS, frame_from_flags
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
-from urpt_gcs.vehicle.link import DEFAULT_URL
+from urpt_gcs.vehicle.protocol import DEFAULT_URL
 from urpt_gcs.visibility.regions import DEFAULT_HEADINGS
 
 if TYPE_CHECKING:

@@ -13,7 +13,7 @@ import click
 
 from urpt_gcs.cli._root import fail, main, terminal_progress, upload_and_report
 from urpt_gcs.errors import SettingsError, UrptError
-from urpt_gcs.vehicle.link import DEFAULT_URL
+from urpt_gcs.vehicle.protocol import DEFAULT_URL
 
 if TYPE_CHECKING:
     from urpt_gcs.replay.fly import ReplaySettings

@@ -21,6 +21,16 @@ from urpt_gcs.flight.geofence import Geofence
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.progress import Progress
 from urpt_gcs.vehicle.link import UploadReport, UploadSettings, refuse_unfit, upload_with_fence
+from urpt_gcs.vehicle.mavsdk_link import connect, connect_systems
+
+__all__ = [
+    "FleetUploadReport",
+    "VehicleUpload",
+    "check_connections",
+    "parse_system_ids",
+    "report_lines",
+    "upload_fleet",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,8 +177,6 @@ async def _one(
     settings: UploadSettings,
     say: Progress,
 ) -> VehicleUpload:
-    from urpt_gcs.vehicle.mavsdk_link import connect
-
     mission, fence = load
     prefix = f"{entry.vehicle.name}: "
     try:
@@ -213,8 +221,6 @@ async def _by_sysid(
     say: Progress,
     sortie: int,
 ) -> list[VehicleUpload]:
-    from urpt_gcs.vehicle.mavsdk_link import connect_systems
-
     entries = [
         _entry(v, f"{url} (system {sysid})", sortie, load is not None)
         for v, sysid, load in zip(fleet.vehicles, system_ids, loaded, strict=True)
