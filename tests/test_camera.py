@@ -295,8 +295,8 @@ def test_a_photo_off_its_heading_is_a_problem() -> None:
     """A CAMERA_FEEDBACK heading more than 5 degrees off its waypoint's is reported."""
     import pyproj as _pyproj
 
-    from urpt_gcs.replay.fly import PhotoFix
     from urpt_gcs.replay.judge import _photo_headings
+    from urpt_gcs.replay.record import PhotoFix
 
     mission = _mission("ardupilot", [10.0, 100.0, 200.0])
     photos = [PhotoFix(k + 1, 47.0, 9.0, 50.0, k, h) for k, h in enumerate([12.0, 94.0, 200.0])]

@@ -28,7 +28,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -37,14 +37,12 @@ import pyproj
 from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.files.formats.qgc_plan import read_replay_check
 from urpt_gcs.flight.mission import Mission, photo_headings, waypoint_positions
+from urpt_gcs.replay.record import Flight
 from urpt_gcs.site.camera import Frame, grid_bearing_deg
 from urpt_gcs.site.targets import Target, read_targets
 from urpt_gcs.site.terrain import WGS84, Terrain, open_dem, planning_crs, read_terrain
 from urpt_gcs.visibility.regions import in_frame, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
-
-if TYPE_CHECKING:
-    from urpt_gcs.replay.fly import Flight
 
 # Photo positions are on MAVLink's 1e-7 degree grid (about 1 cm): allow that on the cone.
 CONE_TOLERANCE_M = 0.02
