@@ -339,9 +339,10 @@ async def fly_connected(
 ) -> Flight:
     """Fly ``mission`` on the vehicle at ``link``, already connected: upload, arm and fly.
 
-    ``before_arming``, if given, is awaited once the vehicle is ready to arm (a fleet's vehicles wait there for each other), and the vehicle then waits
-    ``start_delay_s`` more on its own clock before it arms; ``after_arming`` is called once
-    it is armed."""
+    ``before_arming``, if given, is awaited once the vehicle is ready to arm (a fleet's
+    vehicles wait there for each other), and the vehicle then waits ``start_delay_s`` more on
+    its own clock before it arms; ``after_arming`` is called once it is armed.
+    """
     upload = await upload_verified(link, mission, UploadSettings(), say)
     vehicle = await identify(link, where)
     param, telemetry, action = (
