@@ -17,6 +17,16 @@ from typing import Any, Literal
 from urpt_gcs.errors import MissionFileError
 from urpt_gcs.files.mission_file import PLAN_STEM
 
+__all__ = [
+    "SUMMARY_MAX_BYTES",
+    "SUMMARY_NAME",
+    "FleetFolder",
+    "FleetVehicle",
+    "Separation",
+    "SeparationMode",
+    "read_fleet",
+]
+
 SUMMARY_NAME = "summary.json"
 SUMMARY_MAX_BYTES = 16 * 1024 * 1024
 SeparationMode = Literal["altitude", "time"]

@@ -26,6 +26,23 @@ from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.flight.mission import GeoPoint
 from urpt_gcs.replay.launcher import Launch, RunningSitl, SitlKind, supervised, tail
 
+__all__ = [
+    "ARDUCOPTER",
+    "BINARY_NAME",
+    "CAMERA_PARAMS",
+    "CHECKOUT_DEFAULTS",
+    "DEFAULTS_NAME",
+    "ENV_VAR",
+    "INSTANCES",
+    "PORT_STEP",
+    "SERIAL0_PORT",
+    "SERIAL1_PORT",
+    "START_TIMEOUT_S",
+    "find_defaults",
+    "launch",
+    "resolve_binary",
+]
+
 BINARY_NAME = "arducopter"
 ENV_VAR = "URPT_ARDUPILOT"
 DEFAULTS_NAME = "copter.parm"

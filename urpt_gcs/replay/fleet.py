@@ -58,6 +58,20 @@ from urpt_gcs.site.targets import read_targets
 from urpt_gcs.site.terrain import open_dem
 from urpt_gcs.vehicle.mavsdk_link import connect
 
+__all__ = [
+    "ALTITUDE_TOLERANCE_M",
+    "DELAY_WINDOW",
+    "ON_GROUND_M",
+    "SAME_PAD_M",
+    "Approach",
+    "FleetReport",
+    "closest_approach",
+    "fleet_report_text",
+    "fly_fleet",
+    "replay_fleet",
+    "required_separation_m",
+]
+
 # Altitude layers: a vehicle holds its altitude to well under a metre (ArduCopter SITL: 0.01 m
 # at its photos); this much below the spacing is still separation.
 ALTITUDE_TOLERANCE_M = 2.0

@@ -57,6 +57,31 @@ from urpt_gcs.site.terrain import open_dem
 from urpt_gcs.vehicle.link import UploadSettings, upload_verified
 from urpt_gcs.vehicle.mavsdk_link import MavsdkLink, connect
 
+__all__ = [
+    "ARMING_MODE",
+    "ARMING_TEXT_PREFIXES",
+    "ARM_RETRY_S",
+    "ARM_RETRY_TOGETHER_S",
+    "ARM_WAIT_S",
+    "AUTOPILOT",
+    "CONNECT_TIMEOUT_S",
+    "GUIDED_TAKEOFF_M",
+    "MISSION_START_RETRY_S",
+    "MISSION_START_TRIES",
+    "PX4_MAX_SPEEDUP",
+    "STATUS_WAIT_S",
+    "VERSION_WAIT_S",
+    "ReplaySettings",
+    "TakeoffMethod",
+    "estimate_wall_timeout_s",
+    "fly",
+    "fly_connected",
+    "free_udp_port",
+    "identify",
+    "replay",
+    "replay_set",
+]
+
 TakeoffMethod = Literal["auto-options", "guided"]
 GUIDED_TAKEOFF_M = 10.0
 CONNECT_TIMEOUT_S = 10.0

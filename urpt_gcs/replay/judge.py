@@ -44,6 +44,26 @@ from urpt_gcs.site.terrain import WGS84, Terrain, open_dem, planning_crs, read_t
 from urpt_gcs.visibility.regions import in_frame, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
 
+__all__ = [
+    "CONE_TOLERANCE_M",
+    "CRUISE_BAND_M",
+    "DEFAULT_FOV_DEG",
+    "DEFAULT_MIN_CLEARANCE_M",
+    "HEADING_TOLERANCE_DEG",
+    "SAME_PLACE_DEG",
+    "SUMMARY_FILE",
+    "TERRAIN_MARGIN_M",
+    "Expected",
+    "ReplayReport",
+    "SetReport",
+    "TargetSeen",
+    "expected_checks",
+    "judge",
+    "judge_set",
+    "report_text",
+    "set_report_text",
+]
+
 # Photo positions are on MAVLink's 1e-7 degree grid (about 1 cm): allow that on the cone.
 CONE_TOLERANCE_M = 0.02
 # A frame camera's photo must be taken within this of the heading its waypoint turns to.

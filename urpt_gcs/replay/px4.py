@@ -32,6 +32,22 @@ from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.flight.mission import GeoPoint
 from urpt_gcs.replay.launcher import RunningSitl, SitlKind, supervised, tail
 
+__all__ = [
+    "ENVIRONMENT",
+    "FAILED_TEXTS",
+    "GCS_PORT",
+    "INSTANCES",
+    "LOG_NAME",
+    "MODEL",
+    "PX4",
+    "READY_TEXT",
+    "START_TIMEOUT_S",
+    "find_build",
+    "free_instance",
+    "launch",
+    "ports",
+]
+
 ENVIRONMENT = "URPT_PX4"
 MODEL = "sihsim_quadx"
 # PX4 caps the API link's remote port at 14549 from instance 10 on; instance 0 is what a

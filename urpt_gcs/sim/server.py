@@ -30,6 +30,16 @@ from urpt_gcs.sim.model import FORCE_DISARM, Vehicle
 from urpt_gcs.sim.settings import VehicleSettings
 from urpt_gcs.sim.transfer import MissionTransfer
 
+__all__ = [
+    "COMPONENT_ID",
+    "MAX_SUBSTEP_S",
+    "TICK_S",
+    "FaultyLink",
+    "Message",
+    "SitlServer",
+    "pymavlink_device",
+]
+
 Message = Any
 TICK_S = 0.01
 MAX_SUBSTEP_S = 0.1

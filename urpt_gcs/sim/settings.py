@@ -8,6 +8,13 @@ from dataclasses import dataclass
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.flight.mission import GeoPoint
 
+__all__ = [
+    "DEFAULT_CAPACITY",
+    "DEFAULT_HOME",
+    "VehicleSettings",
+    "parse_home",
+]
+
 # ArduPilot's capacity on common boards: (storage bytes - 4) / 15 items (see FACTS).
 DEFAULT_CAPACITY = 700
 DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)
