@@ -427,7 +427,7 @@ def test_refusal_after_boot_is_waited_out() -> None:
 
 
 def test_a_vehicle_that_keeps_starting_is_named_so(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("urpt_gcs.vehicle.link.STARTING_WAIT_S", 1.0)
+    monkeypatch.setattr("urpt_gcs.vehicle.transfer.STARTING_WAIT_S", 1.0)
     mission = demo_mission()
     with simulated(mission, boot_s=30.0) as (_server, url), pytest.raises(LinkError) as raised:
         upload(mission, url)

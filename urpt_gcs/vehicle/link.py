@@ -16,14 +16,15 @@ is :class:`urpt_gcs.vehicle.mavsdk_link.MavsdkLink`. Errors are
 
 ArduPilot refuses every upload for a moment after boot with ``MAV_MISSION_NO_SPACE`` and
 "Only 0 items are supported" (its mission storage is not up yet): that is read as "still
-starting", waited out with a growing pause for up to :data:`STARTING_WAIT_S`, and not counted
-as a failed attempt.
+starting", waited out with a growing pause for up to
+:data:`~urpt_gcs.vehicle.transfer.STARTING_WAIT_S`, and not counted as a failed attempt.
 
 A plan's geofence goes up after the mission, as a fence mission read back and compared the
 same way (:func:`upload_fence_verified`). A vehicle that refuses fences altogether gets the
 mission alone and a warning; a fence it accepted but does not hold as sent is an error.
-Mission and fence share one retry loop; what differs between them (messages, what a refusal
-means, ArduPilot's start-up wait) is said by a transfer object each.
+Mission and fence share one retry loop (:func:`urpt_gcs.vehicle.transfer.until_verified`);
+what differs between them (messages, what a refusal means, ArduPilot's start-up wait) is
+said by a transfer object each.
 """
 
 from __future__ import annotations
@@ -31,9 +32,8 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Coroutine, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
 
 from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.flight.geofence import Geofence, compare_fence, fence_items
@@ -60,13 +60,11 @@ from urpt_gcs.vehicle.protocol import (
     VehicleLink,
 )
 from urpt_gcs.vehicle.readback import compare
+from urpt_gcs.vehicle.transfer import Stalled, StartingWait, until_stalled, until_verified
 
 __all__ = [
     "READBACK_S_PER_ITEM",
     "RETRYABLE",
-    "STARTING_FIRST_PAUSE_S",
-    "STARTING_MAX_PAUSE_S",
-    "STARTING_WAIT_S",
     "FenceReport",
     "UploadReport",
     "UploadSettings",
@@ -79,11 +77,6 @@ __all__ = [
 ]
 
 READBACK_S_PER_ITEM = 1.0
-# A real ArduCopter SITL is ready about 2 s after its first client connects (0.15 s at 10x);
-# a board on a slow SD card can take several seconds more.
-STARTING_WAIT_S = 30.0
-STARTING_FIRST_PAUSE_S = 0.5
-STARTING_MAX_PAUSE_S = 4.0
 _NAMES = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
 
 
@@ -207,7 +200,7 @@ async def upload_verified(
             f"{link.url} runs {_NAMES[autopilot]}: plan it again with --firmware {autopilot}"
         )
     transfer = _MissionTransfer(link, wire_items(mission), mission.firmware, settings, say)
-    got, check, attempt = await _until_verified(transfer, settings)
+    got, check, attempt = await until_verified(transfer, settings.retries, settings.busy_wait_s)
     warnings.extend(check.warnings)
     home = _vehicle_home(got) if mission.firmware == "ardupilot" else None
     warnings.extend(_home_warnings(mission, home))
@@ -261,86 +254,8 @@ async def upload_fence_verified(
     say = progress or (lambda _msg: None)
     started = time.monotonic()
     transfer = _FenceTransfer(link, fence, fence_items(fence), firmware, settings, say)
-    _got, _check, attempt = await _until_verified(transfer, settings)
+    _got, _check, attempt = await until_verified(transfer, settings.retries, settings.busy_wait_s)
     return FenceReport(fence.describe(), len(transfer.items), attempt, time.monotonic() - started)
-
-
-class _Transfer(Protocol):
-    """One kind of verified transfer (a mission, a fence) as :func:`_until_verified` runs it."""
-
-    @property
-    def differs(self) -> str:
-        """What a read-back that differs is called in the messages."""
-        ...
-
-    @property
-    def pause_after_last(self) -> bool:
-        """Whether a refusal on the last attempt is still followed by the busy wait."""
-        ...
-
-    def announce(self, attempt: int, attempts: int, problem: str) -> None:
-        """Say that attempt ``attempt`` starts (``problem``: why the one before failed)."""
-        ...
-
-    async def attempt(self) -> list[WireItem]:
-        """Send the items and read them back; LinkTimeout or MissionRejected if that fails."""
-        ...
-
-    async def starting(self, refusal: MissionRejected) -> bool:
-        """Wait out a refusal that does not count as an attempt; False if it counts."""
-        ...
-
-    def refused(self, refusal: MissionRejected) -> None:
-        """Raise at once for a refusal that trying again cannot cure."""
-        ...
-
-    def compare(self, got: Sequence[WireItem]) -> Comparison:
-        """The read-back against what was sent."""
-        ...
-
-    def gave_up(self, attempts: int, problem: str, refusal: MissionRejected | None) -> LinkError:
-        """The error once every attempt has failed."""
-        ...
-
-
-async def _until_verified(
-    transfer: _Transfer, settings: UploadSettings
-) -> tuple[list[WireItem], Comparison, int]:
-    """Attempt ``transfer`` until a read-back is equal, up to ``settings.retries`` more times:
-    the read-back, its comparison and the attempt that succeeded.
-
-    A timeout or a differing read-back is tried again; a refusal too, after
-    ``settings.busy_wait_s`` times the attempt number, unless the transfer says it cannot be
-    cured.
-    """
-    attempts = settings.retries + 1
-    problem = ""
-    refusal: MissionRejected | None = None
-    attempt = 0
-    while attempt < attempts:
-        attempt += 1
-        transfer.announce(attempt, attempts, problem)
-        refusal = None
-        try:
-            got = await transfer.attempt()
-        except LinkTimeout as exc:
-            problem = str(exc)
-            continue
-        except MissionRejected as exc:
-            if await transfer.starting(exc):
-                attempt -= 1
-                continue
-            transfer.refused(exc)
-            refusal, problem = exc, f"the vehicle refused it with {exc}"
-            if attempt < attempts or transfer.pause_after_last:
-                await asyncio.sleep(settings.busy_wait_s * attempt)
-            continue
-        check = transfer.compare(got)
-        if check.equal:
-            return got, check, attempt
-        more = f" (and {len(check.mismatches) - 1} more)" if len(check.mismatches) > 1 else ""
-        problem = f"{transfer.differs}: {check.mismatches[0]}{more}"
-    raise transfer.gave_up(attempts, problem, refusal)
 
 
 class _MissionTransfer:
@@ -363,7 +278,7 @@ class _MissionTransfer:
         self.firmware = firmware
         self.settings = settings
         self.say = say
-        self._starting = _Starting(link.url)
+        self._starting = StartingWait(link.url)
 
     def announce(self, attempt: int, attempts: int, problem: str) -> None:
         if attempt > 1 and not self._starting.waiting:
@@ -464,33 +379,6 @@ class _FenceTransfer:
         )
 
 
-class _Starting:
-    """Waits out ArduPilot's start-up refusals with a growing pause, up to STARTING_WAIT_S."""
-
-    def __init__(self, url: str) -> None:
-        self.url = url
-        self.waiting = False
-        self._since: float | None = None
-        self._pause_s = STARTING_FIRST_PAUSE_S
-
-    async def pause(self, say: Progress) -> None:
-        now = time.monotonic()
-        if self._since is None:
-            self._since = now
-        if now - self._since > STARTING_WAIT_S:
-            raise MissionRejected(
-                "MAV_MISSION_NO_SPACE",
-                f"the vehicle on {self.url} is still starting after {STARTING_WAIT_S:g} s (it "
-                "says 'Only 0 items are supported' until its mission storage is up): wait for "
-                "'ArduPilot Ready' and upload again",
-                starting=True,
-            )
-        self.waiting = True
-        say(f"the vehicle is still starting: trying again in {self._pause_s:g} s")
-        await asyncio.sleep(self._pause_s)
-        self._pause_s = min(self._pause_s * 2.0, STARTING_MAX_PAUSE_S)
-
-
 def refuse_unfit(mission: Mission) -> None:
     """Raise :class:`SettingsError` for a mission that must not reach a vehicle.
 
@@ -556,11 +444,11 @@ async def _attempt(
 
     await link.wait_connected(settings.timeout_s)
     try:
-        await _until_stalled(link.upload(items, on_progress), heard, settings.transfer_timeout_s)
+        await until_stalled(link.upload(items, on_progress), heard, settings.transfer_timeout_s)
     except UploadUnconfirmed as exc:
         # Success still needs the read-back below to match item for item.
         say(f"{exc}: reading the mission back to check")
-    except _Stalled:
+    except Stalled:
         await link.cancel()
         raise LinkTimeout(
             f"the upload made no progress for {settings.transfer_timeout_s:g} s"
@@ -580,31 +468,6 @@ async def _attempt(
         except LinkTimeout as exc:
             problem = str(exc)
     raise LinkTimeout(problem)
-
-
-class _Stalled(Exception):
-    """A transfer made no progress for too long."""
-
-
-async def _until_stalled(
-    transfer: Coroutine[Any, Any, None], heard: list[float], stall_s: float
-) -> None:
-    """Run ``transfer``, cancelled with _Stalled once ``heard[0]`` (its last progress) is
-    ``stall_s`` old."""
-    task = asyncio.ensure_future(transfer)
-    try:
-        while True:
-            left = heard[0] + stall_s - time.monotonic()
-            if left <= 0.0:
-                raise _Stalled
-            done, _pending = await asyncio.wait({task}, timeout=left)
-            if done:
-                task.result()
-                return
-    finally:
-        if not task.done():
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
 
 
 def _vehicle_home(got: Sequence[WireItem]) -> GeoPoint | None:
