@@ -27,11 +27,12 @@ from pathlib import Path
 from urpt_gcs.errors import LinkError
 from urpt_gcs.files.formats import read_plan
 from urpt_gcs.flight.mission import Mission
+from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.replay.fly import free_udp_port
 from urpt_gcs.sim import SitlServer, VehicleSettings
 from urpt_gcs.vehicle import mavsdk_link
 from urpt_gcs.vehicle.link import UploadSettings, upload
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO_PLAN = REPO / "missions" / "demo" / "out" / "mission.plan"

@@ -27,12 +27,13 @@ from urpt_gcs.flight.mission import (
     photo_headings,
     upload_problem,
 )
+from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.sim.store import Item, ardupilot_stored
 from urpt_gcs.site.camera import CAMERAS, Frame, frame_from_flags
 from urpt_gcs.solvers import SolveSettings
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 from urpt_gcs.visibility.regions import Camera
 
 MAV = mavutil.mavlink
@@ -294,8 +295,8 @@ def test_a_photo_off_its_heading_is_a_problem() -> None:
     """A CAMERA_FEEDBACK heading more than 5 degrees off its waypoint's is reported."""
     import pyproj as _pyproj
 
-    from urpt_gcs.replay.fly import PhotoFix
     from urpt_gcs.replay.judge import _photo_headings
+    from urpt_gcs.replay.record import PhotoFix
 
     mission = _mission("ardupilot", [10.0, 100.0, 200.0])
     photos = [PhotoFix(k + 1, 47.0, 9.0, 50.0, k, h) for k, h in enumerate([12.0, 94.0, 200.0])]

@@ -27,8 +27,10 @@ from scipy.ndimage import minimum_filter1d
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.fleet_folder import read_fleet
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.replay.fleet import FleetReport, replay_fleet
-from urpt_gcs.replay.fly import Flight, ReplaySettings, free_udp_port, read_mission
+from urpt_gcs.replay.fly import ReplaySettings, free_udp_port
+from urpt_gcs.replay.record import Flight
 from urpt_gcs.sim import SitlServer, VehicleSettings
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.vehicle.fleet_upload import upload_fleet
@@ -471,7 +473,7 @@ def _synthetic_flight(
     """A vehicle crossing the origin's meridian at 100 m, 5 m/s east or west, its clock
     ``boot_s`` ahead, running ``rate`` simulated seconds per wall second; each position
     arrives 0-20 ms late."""
-    from urpt_gcs.replay.fly import TrackPoint, VehicleIdentity
+    from urpt_gcs.replay.record import TrackPoint, VehicleIdentity
     from urpt_gcs.vehicle.link import UploadReport
 
     rng = np.random.default_rng(seed)

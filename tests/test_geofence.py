@@ -20,8 +20,9 @@ from urpt_gcs.flight.geofence import (
     fence_items,
     read_plan_geofence,
 )
-from urpt_gcs.vehicle.link import FenceRefused, upload_fence_verified
-from urpt_gcs.vehicle.readback import WireItem
+from urpt_gcs.flight.wire import WireItem
+from urpt_gcs.vehicle.link import upload_fence_verified
+from urpt_gcs.vehicle.protocol import FenceRefused
 
 SQUARE = ((47.688, 9.422), (47.688, 9.4245), (47.6895, 9.4245), (47.6895, 9.422))
 

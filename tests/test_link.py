@@ -33,20 +33,18 @@ from urpt_gcs.flight.mission import (
     build_mission,
     upload_problem,
 )
+from urpt_gcs.flight.wire import WireItem, wire_items
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.store import Item, ardupilot_stored, px4_stored
 from urpt_gcs.vehicle import mavsdk_link
-from urpt_gcs.vehicle.link import (
+from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload, upload_verified
+from urpt_gcs.vehicle.protocol import (
     AutopilotKind,
     LinkTimeout,
     MissionRejected,
-    UploadReport,
-    UploadSettings,
     UploadUnconfirmed,
-    upload,
-    upload_verified,
 )
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 
 WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 RELATIVE = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
@@ -429,7 +427,7 @@ def test_refusal_after_boot_is_waited_out() -> None:
 
 
 def test_a_vehicle_that_keeps_starting_is_named_so(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("urpt_gcs.vehicle.link.STARTING_WAIT_S", 1.0)
+    monkeypatch.setattr("urpt_gcs.vehicle.transfer.STARTING_WAIT_S", 1.0)
     mission = demo_mission()
     with simulated(mission, boot_s=30.0) as (_server, url), pytest.raises(LinkError) as raised:
         upload(mission, url)

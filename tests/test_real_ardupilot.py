@@ -31,8 +31,10 @@ from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.files.formats import read_plan
 from urpt_gcs.flight.geofence import read_plan_geofence
 from urpt_gcs.flight.mission import Mission, photo_headings
-from urpt_gcs.replay.ardupilot import RunningSitl, launch, resolve_binary
-from urpt_gcs.replay.fly import Flight, ReplaySettings, replay
+from urpt_gcs.replay.ardupilot import launch, resolve_binary
+from urpt_gcs.replay.fly import ReplaySettings, replay
+from urpt_gcs.replay.launcher import RunningSitl
+from urpt_gcs.replay.record import Flight
 from urpt_gcs.site.targets import read_targets
 from urpt_gcs.vehicle.link import upload
 

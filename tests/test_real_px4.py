@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.cli import main
 from urpt_gcs.flight.mission import Mission, waypoint_positions
+from urpt_gcs.flight.wire import wire_items
 from urpt_gcs.replay import px4 as px4_sitl
 from urpt_gcs.replay.fly import (
     Flight,
@@ -41,7 +42,7 @@ from urpt_gcs.replay.fly import (
 from urpt_gcs.replay.judge import Expected, ReplayReport, TargetSeen, judge
 from urpt_gcs.vehicle.link import upload, upload_verified
 from urpt_gcs.vehicle.mavsdk_link import connect
-from urpt_gcs.vehicle.readback import compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 
 PX4 = SHARED / "px4"
 pytestmark = [

@@ -20,15 +20,17 @@ from simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.formats import waypoints_text
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.flight.mission import Mission
-from urpt_gcs.replay.fly import ReplaySettings, fly, read_mission, replay
+from urpt_gcs.flight.wire import WireItem, wire_items
+from urpt_gcs.replay.fly import ReplaySettings, fly, replay
 from urpt_gcs.sim import VehicleSettings
 from urpt_gcs.sim.events import Reached, Text
 from urpt_gcs.sim.model import Vehicle
 from urpt_gcs.sim.store import Home, Item, MissionStore
 from urpt_gcs.sim.transfer import REREQUEST_S, UPLOAD_TIMEOUT_S, MissionTransfer
 from urpt_gcs.vehicle.link import upload
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.readback import compare
 
 MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 GCS = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)

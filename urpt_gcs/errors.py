@@ -17,7 +17,7 @@ The tree::
     ├── ClusterError (ConnectionError) the Dask cluster cannot be reached or cannot run the jobs
     └── LinkError (ConnectionError)  the vehicle cannot be reached or refused the mission
         ├── MissionRejected           the vehicle answered MISSION_ACK with a refusal
-        └── LinkTimeout               the vehicle stopped answering (in urpt_gcs.vehicle.link)
+        └── LinkTimeout               the vehicle stopped answering (in urpt_gcs.vehicle.protocol)
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from urpt_gcs.pipeline.settings import (
     read_fleet,
 )
 from urpt_gcs.progress import StageProgress
-from urpt_gcs.vehicle.link import DEFAULT_URL
+from urpt_gcs.vehicle.protocol import DEFAULT_URL
 
 __all__ = ["demo_site_command", "plan_command"]
 

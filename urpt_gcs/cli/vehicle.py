@@ -13,7 +13,7 @@ import click
 
 from urpt_gcs.cli._root import main, terminal_progress, upload_and_report
 from urpt_gcs.errors import SettingsError
-from urpt_gcs.vehicle.link import DEFAULT_URL
+from urpt_gcs.vehicle.protocol import DEFAULT_URL
 
 if TYPE_CHECKING:
     from urpt_gcs.replay.fly import ReplaySettings
@@ -78,7 +78,7 @@ def upload_command(
     A .plan's geofence goes up after the mission, as a fence mission, and is read back too.
     With --fleet, each vehicle of a fleet plan gets its own mission, verified on its own.
     """
-    from urpt_gcs.replay.fly import read_fence, read_mission
+    from urpt_gcs.files.mission_file import read_fence, read_mission
 
     if fleet_dir is not None:
         if mission_file is not None:
@@ -296,8 +296,9 @@ def sitl_replay_command(
     Each sortie is checked on the targets it was planned to photograph; several sorties are
     also checked together on every target of --targets.
     """
+    from urpt_gcs.files.mission_file import mission_files
     from urpt_gcs.replay.ardupilot import ENV_VAR, resolve_binary
-    from urpt_gcs.replay.fly import ReplaySettings, mission_files, replay, replay_set
+    from urpt_gcs.replay.fly import ReplaySettings, replay, replay_set
     from urpt_gcs.replay.judge import report_text, set_report_text
     from urpt_gcs.replay.px4 import find_build
 

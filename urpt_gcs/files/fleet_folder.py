@@ -15,6 +15,17 @@ from pathlib import Path
 from typing import Any, Literal
 
 from urpt_gcs.errors import MissionFileError
+from urpt_gcs.files.mission_file import PLAN_STEM
+
+__all__ = [
+    "SUMMARY_MAX_BYTES",
+    "SUMMARY_NAME",
+    "FleetFolder",
+    "FleetVehicle",
+    "Separation",
+    "SeparationMode",
+    "read_fleet",
+]
 
 SUMMARY_NAME = "summary.json"
 SUMMARY_MAX_BYTES = 16 * 1024 * 1024
@@ -159,8 +170,6 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
 
 
 def _missions(folder: Path) -> tuple[Path, ...]:
-    from urpt_gcs.replay.fly import PLAN_STEM
-
     if not folder.is_dir():
         return ()
     found = sorted(folder.glob("mission*.plan")) or sorted(folder.glob("mission*.waypoints"))

@@ -22,7 +22,20 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import MissionFileError, SettingsError
 from urpt_gcs.flight.mission import Firmware, GeoPoint, command_name
-from urpt_gcs.vehicle.readback import Comparison, WireItem
+from urpt_gcs.flight.wire import Comparison, WireItem
+
+__all__ = [
+    "CIRCLE_COMMANDS",
+    "FENCE_TYPE",
+    "POLYGON_COMMANDS",
+    "RADIUS_TOLERANCE_M",
+    "FenceCircle",
+    "FencePolygon",
+    "Geofence",
+    "compare_fence",
+    "fence_items",
+    "read_plan_geofence",
+]
 
 FENCE_TYPE = mavlink.MAV_MISSION_TYPE_FENCE
 POLYGON_COMMANDS = {

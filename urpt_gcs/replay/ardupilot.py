@@ -16,17 +16,32 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import socket
 import subprocess
-import tempfile
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.flight.mission import GeoPoint
+from urpt_gcs.replay.launcher import Launch, RunningSitl, SitlKind, supervised, tail
+
+__all__ = [
+    "ARDUCOPTER",
+    "BINARY_NAME",
+    "CAMERA_PARAMS",
+    "CHECKOUT_DEFAULTS",
+    "DEFAULTS_NAME",
+    "ENV_VAR",
+    "INSTANCES",
+    "PORT_STEP",
+    "SERIAL0_PORT",
+    "SERIAL1_PORT",
+    "START_TIMEOUT_S",
+    "find_defaults",
+    "launch",
+    "resolve_binary",
+]
 
 BINARY_NAME = "arducopter"
 ENV_VAR = "URPT_ARDUPILOT"
@@ -44,37 +59,15 @@ SERIAL1_PORT = 5762
 PORT_STEP = 10
 # At 10x the TCP port is open within 0.2 s of start; a loaded machine may take much longer.
 START_TIMEOUT_S = 30.0
-STOP_TIMEOUT_S = 5.0
-OUTPUT_TAIL_LINES = 5
-
-
-@dataclass(frozen=True, slots=True)
-class RunningSitl:
-    """A running ArduCopter SITL.
-
-    Attributes
-    ----------
-    url
-        MAVSDK connection string of its first MAVLink port (SERIAL0).
-    pid
-        Its process id.
-    instance
-        The ``-I`` instance it runs as.
-    second_url
-        A pymavlink connection string of its second MAVLink port (SERIAL1), for a second
-        ground station beside MAVSDK.
-    folder
-        The scratch folder it runs in (removed when it stops).
-    speedup
-        Simulated seconds per wall second.
-    """
-
-    url: str
-    pid: int
-    instance: int
-    second_url: str
-    folder: Path
-    speedup: float
+# Its last five lines of output go into an error, blank ones left out.
+ARDUCOPTER = SitlKind(
+    "ArduCopter SITL",
+    stop_timeout_s=5.0,
+    kill_session=False,
+    tail_lines=5,
+    tail_separator=" | ",
+    count_blank=True,
+)
 
 
 def resolve_binary(path: Path | str | None) -> Path:
@@ -148,34 +141,20 @@ def _listening(port: int) -> bool:
     return True
 
 
-def _tail(log: Path, lines: int = OUTPUT_TAIL_LINES) -> str:
-    try:
-        text = log.read_text(errors="replace")
-    except OSError:
-        return ""
-    return " | ".join(line.strip() for line in text.splitlines()[-lines:] if line.strip())
-
-
 def _write_params(folder: Path) -> Path:
     params = folder / "urpt-gcs.parm"
     params.write_text("".join(f"{name} {value}\n" for name, value in CAMERA_PARAMS.items()))
     return params
 
 
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    """Stop the process we started: SIGTERM, then SIGKILL if it lingers."""
-    if process.poll() is not None:
-        return
-    process.terminate()
-    try:
-        process.wait(STOP_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait(STOP_TIMEOUT_S)
-
-
 def _start(
-    binary: Path, defaults: Path, home: GeoPoint, speedup: float, instance: int, folder: Path
+    run: Launch,
+    binary: Path,
+    defaults: Path,
+    home: GeoPoint,
+    speedup: float,
+    instance: int,
+    folder: Path,
 ) -> tuple[subprocess.Popen[bytes], Path]:
     params = _write_params(folder)
     log = folder / "arducopter.log"
@@ -192,17 +171,7 @@ def _start(
         "-I",
         str(instance),
     ]
-    with log.open("wb") as out:
-        # Its own session: Ctrl-C reaches us only, and the finally below stops it in order.
-        process = subprocess.Popen(
-            command,
-            cwd=folder,
-            stdin=subprocess.DEVNULL,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
-    return process, log
+    return run.start(command, folder, log), log
 
 
 def _wait_up(process: subprocess.Popen[bytes], port: int, log: Path, timeout_s: float) -> None:
@@ -211,14 +180,14 @@ def _wait_up(process: subprocess.Popen[bytes], port: int, log: Path, timeout_s: 
         if process.poll() is not None:
             raise LinkError(
                 f"ArduCopter SITL exited with status {process.returncode} at start: "
-                f"{_tail(log) or 'no output'}"
+                f"{tail(log, ARDUCOPTER) or 'no output'}"
             )
         if _listening(port):
             return
         time.sleep(0.05)
     raise LinkError(
         f"ArduCopter SITL did not open TCP port {port} within {timeout_s:g} s: "
-        f"{_tail(log) or 'no output'}; check the binary runs on this machine"
+        f"{tail(log, ARDUCOPTER) or 'no output'}; check the binary runs on this machine"
     )
 
 
@@ -266,30 +235,29 @@ def launch(
     if instance is not None and not 0 <= instance <= 99:
         raise SettingsError(f"SITL instance {instance} is out of range; use 0 to 99")
     candidates = [instance] if instance is not None else list(INSTANCES)
-    folder = Path(tempfile.mkdtemp(prefix="urpt-arducopter-"))
-    process: subprocess.Popen[bytes] | None = None
-    try:
+    with supervised(ARDUCOPTER, "urpt-arducopter-") as run:
+        folder = run.folder
         for number in candidates:
             if not _ports_free(number):
                 continue
             run_dir = folder / f"instance-{number}"
             run_dir.mkdir()
-            process, log = _start(path, defaults, home, speedup, number, run_dir)
+            process, log = _start(run, path, defaults, home, speedup, number, run_dir)
             port = SERIAL0_PORT + PORT_STEP * number
             try:
                 _wait_up(process, port, log, start_timeout_s)
             except LinkError:
                 # Another SITL may have taken the ports between the probe and the start.
-                if process.poll() is not None and "bind" in _tail(log, 20).lower():
+                if process.poll() is not None and "bind" in tail(log, ARDUCOPTER, 20).lower():
                     continue
                 raise
             yield RunningSitl(
                 url=f"tcpout://127.0.0.1:{port}",
                 pid=process.pid,
                 instance=number,
-                second_url=f"tcp:127.0.0.1:{SERIAL1_PORT + PORT_STEP * number}",
                 folder=folder,
                 speedup=speedup,
+                second_url=f"tcp:127.0.0.1:{SERIAL1_PORT + PORT_STEP * number}",
             )
             return
         raise LinkError(
@@ -297,7 +265,3 @@ def launch(
             f"ports {SERIAL0_PORT + PORT_STEP * candidates[0]} and up are taken): stop the "
             "other SITLs and try again"
         )
-    finally:
-        if process is not None:
-            _stop(process)
-        shutil.rmtree(folder, ignore_errors=True)

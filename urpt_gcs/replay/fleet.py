@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,23 +32,45 @@ from scipy.ndimage import minimum_filter1d
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle, Separation
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.progress import Progress
+from urpt_gcs.replay.ardupilot import launch
 from urpt_gcs.replay.fly import (
     CONNECT_TIMEOUT_S,
-    SIMULATED,
-    Flight,
     ReplaySettings,
-    _fly,
     estimate_wall_timeout_s,
+    fly_connected,
     free_udp_port,
-    read_mission,
 )
-from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
+from urpt_gcs.replay.judge import (
+    ReplayReport,
+    SetReport,
+    expected_checks,
+    judge,
+    judge_set,
+    set_report_text,
+)
+from urpt_gcs.replay.record import SIMULATED, Flight
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.settings import VehicleSettings
 from urpt_gcs.site.dem import open_dem
 from urpt_gcs.site.targets import read_targets
+from urpt_gcs.vehicle.mavsdk_link import connect
+
+__all__ = [
+    "ALTITUDE_TOLERANCE_M",
+    "DELAY_WINDOW",
+    "ON_GROUND_M",
+    "SAME_PAD_M",
+    "Approach",
+    "FleetReport",
+    "closest_approach",
+    "fleet_report_text",
+    "fly_fleet",
+    "replay_fleet",
+    "required_separation_m",
+]
 
 # Altitude layers: a vehicle holds its altitude to well under a metre (ArduCopter SITL: 0.01 m
 # at its photos); this much below the spacing is still separation.
@@ -153,8 +176,6 @@ def _start_vehicle(
 ) -> tuple[str, str]:
     """Start vehicle ``number`` at its home; (MAVSDK url, what it is)."""
     if settings.ardupilot is not None:
-        from urpt_gcs.replay.ardupilot import launch
-
         sitl = running.enter_context(launch(settings.ardupilot, mission.home, settings.speedup))
         say(f"vehicle {number}: ArduCopter SITL instance {sitl.instance} (pid {sitl.pid})")
         return sitl.url, f"ArduCopter SITL, pid {sitl.pid}, instance {sitl.instance}"
@@ -188,8 +209,6 @@ async def _fly_all(
     say: Progress,
     delays_s: Sequence[float],
 ) -> list[Flight]:
-    from urpt_gcs.vehicle.mavsdk_link import connect
-
     gate = _TogetherGate(len(missions))
     armed = [asyncio.Event() for _ in missions]
 
@@ -209,7 +228,7 @@ async def _fly_all(
 
         try:
             async with connect(url, CONNECT_TIMEOUT_S) as link:
-                return await _fly(
+                return await fly_connected(
                     link,
                     mission,
                     settings,
@@ -394,8 +413,6 @@ def replay_fleet(
     LinkError
         If a vehicle's upload or flight fails.
     """
-    import time
-
     settings = settings or ReplaySettings()
     for vehicle in fleet.vehicles:
         if len(vehicle.missions) > 1:
@@ -447,8 +464,6 @@ def replay_fleet(
 
 def fleet_report_text(report: FleetReport) -> str:
     """Each vehicle's replay report, all photos together, then the fleet's verdict."""
-    from urpt_gcs.replay.judge import set_report_text
-
     sep = report.separation
     rule = (
         f"by altitude, layers {sep.min_m:g} m apart: required {report.required_m:g} m "

@@ -23,7 +23,6 @@ import contextlib
 import itertools
 import json
 import math
-import re
 import socket
 import time
 from collections.abc import Awaitable, Callable, Sequence
@@ -41,20 +40,47 @@ from mavsdk.plugins.info import InfoError, Version
 from mavsdk.plugins.mavlink_direct import MavlinkMessage
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.errors import LinkError, MissionFileError, SettingsError
-from urpt_gcs.files.formats import read_plan, read_waypoints
-from urpt_gcs.flight.geofence import Geofence, read_plan_geofence
+from urpt_gcs.errors import LinkError, SettingsError
+from urpt_gcs.files.mission_file import read_mission
 from urpt_gcs.flight.mission import Mission, command_name
 from urpt_gcs.progress import Progress
+from urpt_gcs.replay import ardupilot as ardupilot_sitl
+from urpt_gcs.replay import px4 as px4_sitl
 from urpt_gcs.replay.judge import ReplayReport, SetReport, expected_checks, judge, judge_set
+from urpt_gcs.replay.record import SIMULATED, Flight, PhotoFix, TrackPoint, VehicleIdentity
+from urpt_gcs.sim.model import EARTH_RADIUS_M
 from urpt_gcs.sim.params import AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE
 from urpt_gcs.sim.server import SitlServer
 from urpt_gcs.sim.settings import VehicleSettings
 from urpt_gcs.site.dem import open_dem
-from urpt_gcs.site.inputs import MISSION_FILE_MAX_BYTES, read_capped
 from urpt_gcs.site.targets import read_targets
-from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload_verified
+from urpt_gcs.vehicle.link import UploadSettings, upload_verified
 from urpt_gcs.vehicle.mavsdk_link import MavsdkLink, connect
+
+__all__ = [
+    "ARMING_MODE",
+    "ARMING_TEXT_PREFIXES",
+    "ARM_RETRY_S",
+    "ARM_RETRY_TOGETHER_S",
+    "ARM_WAIT_S",
+    "AUTOPILOT",
+    "CONNECT_TIMEOUT_S",
+    "GUIDED_TAKEOFF_M",
+    "MISSION_START_RETRY_S",
+    "MISSION_START_TRIES",
+    "PX4_MAX_SPEEDUP",
+    "STATUS_WAIT_S",
+    "VERSION_WAIT_S",
+    "ReplaySettings",
+    "TakeoffMethod",
+    "estimate_wall_timeout_s",
+    "fly",
+    "fly_connected",
+    "free_udp_port",
+    "identify",
+    "replay",
+    "replay_set",
+]
 
 TakeoffMethod = Literal["auto-options", "guided"]
 GUIDED_TAKEOFF_M = 10.0
@@ -69,12 +95,10 @@ MISSION_START_TRIES = 10
 MISSION_START_RETRY_S = 0.3
 _ASK_AGAIN = (mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
 AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-PLAN_STEM = re.compile(r"mission(?:_[1-9][0-9]*)?")
 # ArduCopter arms in GUIDED once it has a position, and AUTO can take off from it.
 ARMING_MODE = mavlink.COPTER_MODE_GUIDED
 # MAVSDK asks for AUTOPILOT_VERSION itself on connecting; give the answer this long to come.
 VERSION_WAIT_S = 5.0
-SIMULATED = "the simulated ArduCopter (urpt-gcs)"
 # The vehicle's words on why it does not arm ("PreArm: ...", "Arm: ...").
 ARMING_TEXT_PREFIXES = ("PreArm:", "Arm:")
 # SIH keeps time at 20x, but on 2 cores some CAMERA_IMAGE_CAPTURED never reached MAVSDK;
@@ -154,110 +178,6 @@ class ReplaySettings:
             raise SettingsError("--px4 and --ardupilot both name the vehicle: give one")
 
 
-@dataclass(frozen=True, slots=True)
-class PhotoFix:
-    """A photo as CAMERA_FEEDBACK (PX4: CAMERA_IMAGE_CAPTURED) reported it."""
-
-    index: int
-    lat_deg: float
-    lon_deg: float
-    alt_rel_m: float
-    time_s: float
-    # The vehicle's heading CAMERA_FEEDBACK reported (yaw, degrees); NaN where none came.
-    heading_deg: float = math.nan
-
-
-@dataclass(frozen=True, slots=True)
-class TrackPoint:
-    """A position as GLOBAL_POSITION_INT reported it (time in simulated seconds).
-
-    ``wall_s`` is the ground station's monotonic clock when it arrived, one clock for every
-    vehicle of a fleet.
-    """
-
-    time_s: float
-    lat_deg: float
-    lon_deg: float
-    alt_rel_m: float
-    wall_s: float = math.nan
-
-
-@dataclass(frozen=True, slots=True)
-class VehicleIdentity:
-    """Which vehicle flew: its autopilot and version (AUTOPILOT_VERSION) and where it ran.
-
-    ``version`` is empty when the vehicle did not say.
-    """
-
-    autopilot: str
-    version: str
-    where: str
-
-    def describe(self) -> str:
-        """E.g. "ArduPilot 4.7.0-dev (ArduCopter SITL, pid 1234)"."""
-        name = f"{self.autopilot} {self.version}".strip()
-        if self.where == SIMULATED:
-            return f"{SIMULATED}, which reports itself as {name}"
-        return f"{name} ({self.where})"
-
-
-@dataclass(frozen=True, slots=True)
-class Flight:
-    """What the ground station saw of one flight.
-
-    ``sim_time_s`` is the vehicle's clock from arming to the disarm after landing,
-    ``wall_time_s`` the wall clock over the same span.
-    """
-
-    upload: UploadReport
-    photos: tuple[PhotoFix, ...]
-    track: tuple[TrackPoint, ...]
-    sim_time_s: float
-    wall_time_s: float
-    vehicle: VehicleIdentity
-
-
-def read_mission(path: Path, flag: str = "--plan") -> Mission:
-    """A ``.plan`` or ``.waypoints`` file (by extension), of at most 16 MiB.
-
-    ``flag`` is where the operator gave the path, for the messages.
-    """
-    data = read_capped(
-        path,
-        "mission file",
-        flag,
-        MissionFileError,
-        MISSION_FILE_MAX_BYTES,
-        "give the mission urpt-gcs plan wrote",
-    )
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise MissionFileError(f"mission file '{path}' cannot be read: {exc}") from None
-    if path.suffix.lower() == ".waypoints":
-        return read_waypoints(text, str(path))
-    if path.suffix.lower() == ".plan":
-        return read_plan(text, str(path))
-    raise MissionFileError(
-        f"'{path}' is neither a .plan nor a .waypoints file: give the mission urpt-gcs plan wrote"
-    )
-
-
-def read_fence(path: Path) -> Geofence:
-    """The geofence of a ``.plan`` file; empty for a ``.waypoints`` file, which has none."""
-    if path.suffix.lower() != ".plan":
-        return Geofence()
-    data = read_capped(
-        path,
-        "mission file",
-        "--plan",
-        MissionFileError,
-        MISSION_FILE_MAX_BYTES,
-        "give the mission urpt-gcs plan wrote",
-    )
-    return read_plan_geofence(data.decode("utf-8", errors="replace"), str(path))
-
-
 def free_udp_port() -> int:
     """A loopback UDP port that was free a moment ago."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
@@ -268,8 +188,6 @@ def free_udp_port() -> int:
 
 def estimate_wall_timeout_s(mission: Mission, settings: ReplaySettings) -> float:
     """A generous wall-clock limit: three times a rough flight time, plus start-up."""
-    from urpt_gcs.sim.model import EARTH_RADIUS_M
-
     points = [(mission.home.lat_deg, mission.home.lon_deg)]
     holds = 0.0
     for item in mission.items:
@@ -433,7 +351,7 @@ def _version_text(version: Version) -> str:
     return "" if number == "0.0.0" else number + suffix
 
 
-async def _fly(
+async def fly_connected(
     link: MavsdkLink,
     mission: Mission,
     settings: ReplaySettings,
@@ -444,10 +362,12 @@ async def _fly(
     start_delay_s: float = 0.0,
     after_arming: Callable[[], None] | None = None,
 ) -> Flight:
-    """Upload, arm and fly; ``before_arming``, if given, is awaited once the vehicle is
-    ready to arm (a fleet's vehicles wait there for each other), and the vehicle then waits
-    ``start_delay_s`` more on its own clock before it arms; ``after_arming`` is called once
-    it is armed."""
+    """Fly ``mission`` on the vehicle at ``link``, already connected: upload, arm and fly.
+
+    ``before_arming``, if given, is awaited once the vehicle is ready to arm (a fleet's
+    vehicles wait there for each other), and the vehicle then waits ``start_delay_s`` more on
+    its own clock before it arms; ``after_arming`` is called once it is armed.
+    """
     upload = await upload_verified(link, mission, UploadSettings(), say)
     vehicle = await identify(link, where)
     param, telemetry, action = (
@@ -712,11 +632,9 @@ def fly(mission: Mission, settings: ReplaySettings, progress: Progress | None = 
 
     async def run(url: str, where: str) -> Flight:
         async with connect(url, CONNECT_TIMEOUT_S) as link:
-            return await _fly(link, mission, settings, timeout_s, say, where)
+            return await fly_connected(link, mission, settings, timeout_s, say, where)
 
     if settings.px4 is not None:
-        from urpt_gcs.replay import px4 as px4_sitl
-
         say(f"starting PX4 SITL from {settings.px4} (speed-up {settings.speedup:g}x)")
         with px4_sitl.launch(settings.px4, mission.home, settings.speedup) as px4:
             say(f"PX4 SITL running (pid {px4.pid}) on {px4.url}")
@@ -726,10 +644,8 @@ def fly(mission: Mission, settings: ReplaySettings, progress: Progress | None = 
         say(f"flying on the vehicle at {settings.connect}")
         return asyncio.run(run(settings.connect, settings.connect))
     if settings.ardupilot is not None:
-        from urpt_gcs.replay.ardupilot import launch
-
         say(f"starting ArduCopter SITL from {settings.ardupilot} (speed-up {settings.speedup:g}x)")
-        with launch(settings.ardupilot, mission.home, settings.speedup) as sitl:
+        with ardupilot_sitl.launch(settings.ardupilot, mission.home, settings.speedup) as sitl:
             where = f"ArduCopter SITL, pid {sitl.pid}, instance {sitl.instance}"
             return asyncio.run(run(sitl.url, where))
     port = free_udp_port()
@@ -762,31 +678,6 @@ def replay(
     expected = expected_checks(plan_path, mission, settings.fov_deg, settings.min_clearance_m)
     flight = fly(mission, settings, progress)
     return judge(flight, mission, dem_path, targets_path, expected, str(plan_path))
-
-
-def mission_files(paths: Sequence[Path]) -> list[Path]:
-    """The mission files to replay: each file given, and for a folder its sorties'
-    ``mission*.plan`` (or, without any, its ``mission*.waypoints``) in sortie order.
-
-    Raises
-    ------
-    MissionFileError
-        If a folder holds no mission urpt-gcs wrote.
-    """
-    files: list[Path] = []
-    for path in paths:
-        if not path.is_dir():
-            files.append(path)
-            continue
-        found = sorted(path.glob("mission*.plan")) or sorted(path.glob("mission*.waypoints"))
-        found = [f for f in found if PLAN_STEM.fullmatch(f.stem)]
-        if not found:
-            raise MissionFileError(
-                f"--plan folder '{path}' holds no mission.plan or mission_N.plan: give the "
-                "--out folder of urpt-gcs plan, or the mission files"
-            )
-        files.extend(sorted(found, key=lambda f: int(f.stem.partition("_")[2] or 0)))
-    return files
 
 
 def replay_set(

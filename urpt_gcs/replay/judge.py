@@ -28,7 +28,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +37,7 @@ import pyproj
 from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.files.formats.qgc_plan import read_replay_check
 from urpt_gcs.flight.mission import Mission, photo_headings, waypoint_positions
+from urpt_gcs.replay.record import Flight
 from urpt_gcs.site.camera import Frame, grid_bearing_deg
 from urpt_gcs.site.dem import WGS84, open_dem, planning_crs
 from urpt_gcs.site.reading import read_terrain
@@ -45,8 +46,25 @@ from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import in_frame, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
 
-if TYPE_CHECKING:
-    from urpt_gcs.replay.fly import Flight
+__all__ = [
+    "CONE_TOLERANCE_M",
+    "CRUISE_BAND_M",
+    "DEFAULT_FOV_DEG",
+    "DEFAULT_MIN_CLEARANCE_M",
+    "HEADING_TOLERANCE_DEG",
+    "SAME_PLACE_DEG",
+    "SUMMARY_FILE",
+    "TERRAIN_MARGIN_M",
+    "Expected",
+    "ReplayReport",
+    "SetReport",
+    "TargetSeen",
+    "expected_checks",
+    "judge",
+    "judge_set",
+    "report_text",
+    "set_report_text",
+]
 
 # Photo positions are on MAVLink's 1e-7 degree grid (about 1 cm): allow that on the cone.
 CONE_TOLERANCE_M = 0.02

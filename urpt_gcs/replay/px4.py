@@ -20,19 +20,33 @@ SIGTERM by its pid, killed if it does not exit, and ``/tmp/px4_lock-N``,
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
-import shutil
-import signal
 import socket
 import subprocess
-import tempfile
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.flight.mission import GeoPoint
+from urpt_gcs.replay.launcher import RunningSitl, SitlKind, supervised, tail
+
+__all__ = [
+    "ENVIRONMENT",
+    "FAILED_TEXTS",
+    "GCS_PORT",
+    "INSTANCES",
+    "LOG_NAME",
+    "MODEL",
+    "PX4",
+    "READY_TEXT",
+    "START_TIMEOUT_S",
+    "find_build",
+    "free_instance",
+    "launch",
+    "ports",
+]
 
 ENVIRONMENT = "URPT_PX4"
 MODEL = "sihsim_quadx"
@@ -40,34 +54,22 @@ MODEL = "sihsim_quadx"
 # developer's own SITL uses.
 INSTANCES = range(1, 10)
 START_TIMEOUT_S = 60.0
-STOP_TIMEOUT_S = 10.0
 READY_TEXT = "Ready for takeoff!"
 FAILED_TEXTS = ("ERROR [px4] Startup script returned with return value", "already running")
 LOG_NAME = "px4.log"
 GCS_PORT = 18570  # + instance: PX4's GCS link listens here
-_LOG_TAIL_CHARS = 300
-
-
-@dataclass(frozen=True, slots=True)
-class RunningSitl:
-    """A SITL process started by this tool.
-
-    Attributes
-    ----------
-    url
-        MAVSDK connection string that reaches it (loopback only).
-    pid
-        The process id of what was started.
-    instance
-        Its instance number (``-i N`` for PX4).
-    folder
-        The scratch folder it runs in, removed when it stops.
-    """
-
-    url: str
-    pid: int
-    instance: int
-    folder: Path
+# PX4 exits cleanly on SIGTERM; rcS and its px4-* commands run in the session started for
+# it, led by its pid. An error quotes its last three lines that say something, at most 300
+# characters.
+PX4 = SitlKind(
+    "PX4 SITL",
+    stop_timeout_s=10.0,
+    kill_session=True,
+    tail_lines=3,
+    tail_separator=" / ",
+    count_blank=False,
+    tail_chars=300,
+)
 
 
 def ports(instance: int) -> tuple[int, ...]:
@@ -162,15 +164,6 @@ def _environment(home: GeoPoint, speedup: float, commands: Path) -> dict[str, st
     return env
 
 
-def _tail(log: Path) -> str:
-    try:
-        text = log.read_text(errors="replace")
-    except OSError:
-        return ""
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    return " / ".join(lines[-3:])[-_LOG_TAIL_CHARS:]
-
-
 def _wait_ready(
     process: subprocess.Popen[bytes], log: Path, timeout_s: float, claim: socket.socket, port: int
 ) -> None:
@@ -184,29 +177,14 @@ def _wait_ready(
         if READY_TEXT in text:
             return
         if process.poll() is not None or any(failed in text for failed in FAILED_TEXTS):
-            raise LinkError(f"PX4 SITL did not start (it said: {_tail(log) or 'nothing'})")
+            raise LinkError(f"PX4 SITL did not start (it said: {tail(log, PX4) or 'nothing'})")
         if time.monotonic() > deadline:
             raise LinkError(
                 f"PX4 SITL was not ready for take-off within {timeout_s:g} s (last said: "
-                f"{_tail(log) or 'nothing'}): the machine may be too busy; try a lower --speedup"
+                f"{tail(log, PX4) or 'nothing'}): the machine may be too busy; try a lower "
+                "--speedup"
             )
         time.sleep(0.1)
-
-
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    """SIGTERM (PX4 exits cleanly on it), then SIGKILL if it lingers."""
-    if process.poll() is None:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(process.pid, signal.SIGTERM)
-        try:
-            process.wait(STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(process.pid, signal.SIGKILL)
-            process.wait()
-    # rcS and its px4-* commands run in the session started for PX4, led by its pid.
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(process.pid, signal.SIGKILL)
 
 
 @contextlib.contextmanager
@@ -255,31 +233,28 @@ def launch(
             f"PX4 instance {instance} is in use ({_lock(instance)} exists): stop that SITL "
             "or pick another instance"
         )
-    scratch = Path(tempfile.mkdtemp(prefix=f"urpt-px4-{instance}-"))
-    log = scratch / LOG_NAME
-    process: subprocess.Popen[bytes] | None = None
-    claim = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
+    with supervised(PX4, f"urpt-px4-{instance}-") as run:
+        scratch = run.folder
+        log = scratch / LOG_NAME
+        claim = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        run.on_stop(claim.close)
+        run.on_stop(functools.partial(_remove_leftovers, instance))
         claim.bind(("127.0.0.1", 0))
         _command_links(build, scratch / "bin")
-        with log.open("wb") as out:
-            process = subprocess.Popen(
-                [str(build / "run.sh"), "-i", str(instance)],
-                cwd=scratch,
-                env=_environment(home, speedup, scratch / "bin"),
-                stdin=subprocess.DEVNULL,
-                stdout=out,
-                stderr=subprocess.STDOUT,
-                # Ctrl-C goes to us, not to PX4: it is stopped below, in order.
-                start_new_session=True,
-            )
+        process = run.start(
+            [str(build / "run.sh"), "-i", str(instance)],
+            scratch,
+            log,
+            env=_environment(home, speedup, scratch / "bin"),
+        )
         _wait_ready(process, log, start_timeout_s, claim, GCS_PORT + instance)
-        yield RunningSitl(f"udpin://127.0.0.1:{14540 + instance}", process.pid, instance, scratch)
-    finally:
-        if process is not None:
-            _stop(process)
-        claim.close()
-        for leftover in (_lock(instance), _sock(instance)):
-            with contextlib.suppress(FileNotFoundError):
-                leftover.unlink()
-        shutil.rmtree(scratch, ignore_errors=True)
+        yield RunningSitl(
+            f"udpin://127.0.0.1:{14540 + instance}", process.pid, instance, scratch, speedup
+        )
+
+
+def _remove_leftovers(instance: int) -> None:
+    """PX4's lock file and socket of ``instance``, which it leaves behind when killed."""
+    for leftover in (_lock(instance), _sock(instance)):
+        with contextlib.suppress(FileNotFoundError):
+            leftover.unlink()

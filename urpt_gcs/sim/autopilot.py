@@ -10,15 +10,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.sim.events import Current
-from urpt_gcs.sim.store import Item
+from urpt_gcs.sim.events import Current, Event
+from urpt_gcs.sim.params import Params
+from urpt_gcs.sim.store import Item, MissionStore
 
-if TYPE_CHECKING:
-    from urpt_gcs.sim.model import Vehicle
+__all__ = [
+    "FOREVER_S",
+    "NAV_COMMANDS",
+    "AutoVehicle",
+    "Plan",
+    "SCurve",
+    "Step",
+    "mission_steps",
+    "rtl_steps",
+]
 
 NAV_COMMANDS = frozenset(
     {
@@ -31,6 +40,30 @@ NAV_COMMANDS = frozenset(
     }
 )
 FOREVER_S = float("inf")
+
+
+class AutoVehicle(Protocol):
+    """What AUTO and RTL read and change of the copter (:class:`urpt_gcs.sim.model.Vehicle`)."""
+
+    params: Params
+    store: MissionStore
+    events: list[Event]
+    alt_m: float
+    speed_m_s: float | None
+    heading_deg: float
+    current_seq: int
+
+    def to_east_north(self, lat_e7: int, lon_e7: int) -> tuple[float, float]:
+        """Metres east and north of home of a point in degrees * 1e7."""
+        ...
+
+    def mission_item_alt(self, frame: int, z: float) -> float:
+        """An item's altitude as metres above home."""
+        ...
+
+    def take_photo(self) -> None:
+        """Record a photo here."""
+        ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,14 +159,14 @@ class Plan:
     steps: list[Step] = field(default_factory=list)
 
 
-def _target(vehicle: Vehicle, item: Item) -> tuple[float | None, float | None]:
+def _target(vehicle: AutoVehicle, item: Item) -> tuple[float | None, float | None]:
     # ArduPilot: a location of 0, 0 means "here".
     if item.x == 0 and item.y == 0:
         return None, None
     return vehicle.to_east_north(item.x, item.y)
 
 
-def _run_do(vehicle: Vehicle, item: Item) -> None:
+def _run_do(vehicle: AutoVehicle, item: Item) -> None:
     digicam = item.command == mavlink.MAV_CMD_DO_DIGICAM_CONTROL and item.x == 1
     capture = item.command == mavlink.MAV_CMD_IMAGE_START_CAPTURE and item.param3 >= 1
     # Speed types 0 and 1 set the horizontal speed; 2 and 3 (climb, descent) are not simulated.
@@ -151,7 +184,7 @@ def _run_do(vehicle: Vehicle, item: Item) -> None:
             vehicle.heading_deg = item.param1 % 360.0
 
 
-def rtl_steps(vehicle: Vehicle) -> list[Step]:
+def rtl_steps(vehicle: AutoVehicle) -> list[Step]:
     """ArduCopter RTL: climb to RTL_ALT (or keep a higher altitude), fly home at RTL_SPEED (or
     WPNAV_SPEED), loiter, land."""
     params = vehicle.params
@@ -171,7 +204,7 @@ def rtl_steps(vehicle: Vehicle) -> list[Step]:
     return steps
 
 
-def _nav_steps(vehicle: Vehicle, item: Item) -> list[Step]:
+def _nav_steps(vehicle: AutoVehicle, item: Item) -> list[Step]:
     east, north = _target(vehicle, item)
     alt = vehicle.mission_item_alt(item.frame, item.z)
     command = item.command
@@ -190,7 +223,7 @@ def _nav_steps(vehicle: Vehicle, item: Item) -> list[Step]:
     return []
 
 
-def mission_steps(vehicle: Vehicle, start_seq: int) -> Plan | None:
+def mission_steps(vehicle: AutoVehicle, start_seq: int) -> Plan | None:
     """Run the "do" commands from ``start_seq`` on and plan the next navigation command.
 
     Returns None when the mission has no navigation command left.

@@ -4,6 +4,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+__all__ = [
+    "Current",
+    "Event",
+    "Photo",
+    "PhotoTaken",
+    "Reached",
+    "Text",
+]
+
 
 @dataclass(frozen=True, slots=True)
 class Photo:

@@ -31,6 +31,17 @@ from urpt_gcs.sim.params import (
 from urpt_gcs.sim.settings import VehicleSettings
 from urpt_gcs.sim.store import Home, MissionStore
 
+__all__ = [
+    "EARTH_RADIUS_M",
+    "FORCE_DISARM",
+    "HOVER_MODES",
+    "LAND_DETECT_S",
+    "NOT_ARMABLE",
+    "USER_TAKEOFF_MODES",
+    "Vehicle",
+    "mode_name",
+]
+
 EARTH_RADIUS_M = 6_378_137.0
 # ArduCopter's land detector: on ArduCopter 4.7 SITL the disarm after an RTL came 2.5-3.1 s
 # after the copter reached the ground.

@@ -12,6 +12,18 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+__all__ = [
+    "AUTO_OPTION_ALLOW_ARMING",
+    "AUTO_OPTION_TAKEOFF_WITHOUT_THROTTLE",
+    "DEFAULTS",
+    "INT8",
+    "INT16",
+    "INT32",
+    "REAL32",
+    "ParamValue",
+    "Params",
+]
+
 INT32 = mavlink.MAV_PARAM_TYPE_INT32
 INT16 = mavlink.MAV_PARAM_TYPE_INT16
 INT8 = mavlink.MAV_PARAM_TYPE_INT8

@@ -23,12 +23,22 @@ from typing import Any
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+import urpt_gcs.sim.telemetry as telemetry
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.sim import telemetry
 from urpt_gcs.sim.events import Current, Event, Photo, PhotoTaken, Reached, Text
 from urpt_gcs.sim.model import FORCE_DISARM, Vehicle
 from urpt_gcs.sim.settings import VehicleSettings
 from urpt_gcs.sim.transfer import MissionTransfer
+
+__all__ = [
+    "COMPONENT_ID",
+    "MAX_SUBSTEP_S",
+    "TICK_S",
+    "FaultyLink",
+    "Message",
+    "SitlServer",
+    "pymavlink_device",
+]
 
 Message = Any
 TICK_S = 0.01

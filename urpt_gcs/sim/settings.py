@@ -9,6 +9,13 @@ from urpt_gcs.errors import SettingsError
 from urpt_gcs.flight.mission import GeoPoint
 from urpt_gcs.site.position import parse_latlon
 
+__all__ = [
+    "DEFAULT_CAPACITY",
+    "DEFAULT_HOME",
+    "VehicleSettings",
+    "parse_home",
+]
+
 # ArduPilot's capacity on common boards: (storage bytes - 4) / 15 items (see FACTS).
 DEFAULT_CAPACITY = 700
 DEFAULT_HOME = GeoPoint(47.397742, 8.545594, 488.0)

@@ -40,6 +40,23 @@ from dataclasses import dataclass, replace
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+__all__ = [
+    "ABSOLUTE_FRAMES",
+    "LOCATION_COMMANDS",
+    "NAN_PARAM4_COMMANDS",
+    "RELATIVE_FRAMES",
+    "TERRAIN_FRAMES",
+    "Home",
+    "Item",
+    "MissionStore",
+    "ParamStore",
+    "ardupilot_check",
+    "ardupilot_stored",
+    "centimetres",
+    "px4_check",
+    "px4_stored",
+]
+
 ABSOLUTE_FRAMES = frozenset(
     {mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_MISSION}
 )

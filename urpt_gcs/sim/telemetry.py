@@ -17,6 +17,31 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.sim.model import Vehicle
 
+__all__ = [
+    "BUILDERS",
+    "CAPABILITIES",
+    "DEFAULT_PERIOD_S",
+    "FLIGHT_SW_VERSION",
+    "HEARTBEAT_PERIOD_S",
+    "PX4_AUTO_LOITER",
+    "SENSORS",
+    "STREAM_GROUPS",
+    "Builder",
+    "Message",
+    "Streams",
+    "attitude",
+    "autopilot_version",
+    "extended_sys_state",
+    "global_position_int",
+    "gps_raw_int",
+    "heartbeat",
+    "home_position",
+    "mission_current",
+    "sys_status",
+    "system_time",
+    "vfr_hud",
+]
+
 Message = Any
 Builder = Callable[[mavlink.MAVLink, Vehicle], Message]
 

@@ -29,6 +29,14 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.sim.store import Item, MissionStore
 
+__all__ = [
+    "MISSION",
+    "REREQUEST_S",
+    "UPLOAD_TIMEOUT_S",
+    "Message",
+    "MissionTransfer",
+]
+
 REREQUEST_S = 1.0
 UPLOAD_TIMEOUT_S = 8.0
 MISSION = mavlink.MAV_MISSION_TYPE_MISSION

@@ -1,1 +1,3 @@
 """The drone link: MAVSDK connections, verified uploads with read-back, and fleet uploads."""
+
+__all__: list[str] = []

@@ -16,10 +16,21 @@ from pathlib import Path
 
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle
+from urpt_gcs.files.mission_file import read_fence, read_mission
 from urpt_gcs.flight.geofence import Geofence
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.progress import Progress
 from urpt_gcs.vehicle.link import UploadReport, UploadSettings, refuse_unfit, upload_with_fence
+from urpt_gcs.vehicle.mavsdk_link import connect, connect_systems
+
+__all__ = [
+    "FleetUploadReport",
+    "VehicleUpload",
+    "check_connections",
+    "parse_system_ids",
+    "report_lines",
+    "upload_fleet",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,8 +145,6 @@ def upload_fleet(
     MissionFileError
         Before anything is sent, if a vehicle's mission file cannot be read.
     """
-    from urpt_gcs.replay.fly import read_fence, read_mission
-
     check_connections(fleet, urls, system_ids)
     if sortie < 1:
         raise SettingsError(f"--sortie {sortie} must be 1 or more")
@@ -168,8 +177,6 @@ async def _one(
     settings: UploadSettings,
     say: Progress,
 ) -> VehicleUpload:
-    from urpt_gcs.vehicle.mavsdk_link import connect
-
     mission, fence = load
     prefix = f"{entry.vehicle.name}: "
     try:
@@ -214,8 +221,6 @@ async def _by_sysid(
     say: Progress,
     sortie: int,
 ) -> list[VehicleUpload]:
-    from urpt_gcs.vehicle.mavsdk_link import connect_systems
-
     entries = [
         _entry(v, f"{url} (system {sysid})", sortie, load is not None)
         for v, sysid, load in zip(fleet.vehicles, system_ids, loaded, strict=True)

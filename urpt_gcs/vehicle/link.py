@@ -5,21 +5,26 @@ mission's firmware, uploads, downloads the mission back and compares it item by 
 (:mod:`urpt_gcs.vehicle.readback`). A timeout, a lost link or a read-back that differs restarts the
 whole upload, up to ``retries`` more times; success is reported only for a verified read-back.
 Within one attempt, a read-back that gets no answer is read again, and an upload whose
-acceptance never came (:class:`UploadUnconfirmed`) is settled by the read-back alone.
+acceptance never came (:class:`~urpt_gcs.vehicle.protocol.UploadUnconfirmed`) is settled by
+the read-back alone.
 
-The uploader is written against :class:`VehicleLink`; the real one is
-:class:`urpt_gcs.vehicle.mavsdk_link.MavsdkLink`, loaded only when a link is opened.
-Errors are :class:`~urpt_gcs.errors.LinkError`; a refusal by the vehicle is
-:class:`MissionRejected`, which names the MISSION_ACK result (``MAV_MISSION_NO_SPACE``...).
+The uploader is written against :class:`~urpt_gcs.vehicle.protocol.VehicleLink`; the real one
+is :class:`urpt_gcs.vehicle.mavsdk_link.MavsdkLink`. Errors are
+:class:`~urpt_gcs.errors.LinkError`; a refusal by the vehicle is
+:class:`~urpt_gcs.vehicle.protocol.MissionRejected`, which names the MISSION_ACK result
+(``MAV_MISSION_NO_SPACE``...).
 
 ArduPilot refuses every upload for a moment after boot with ``MAV_MISSION_NO_SPACE`` and
 "Only 0 items are supported" (its mission storage is not up yet): that is read as "still
-starting", waited out with a growing pause for up to :data:`STARTING_WAIT_S`, and not counted
-as a failed attempt.
+starting", waited out with a growing pause for up to
+:data:`~urpt_gcs.vehicle.transfer.STARTING_WAIT_S`, and not counted as a failed attempt.
 
 A plan's geofence goes up after the mission, as a fence mission read back and compared the
 same way (:func:`upload_fence_verified`). A vehicle that refuses fences altogether gets the
 mission alone and a warning; a fence it accepted but does not hold as sent is an error.
+Mission and fence share one retry loop (:func:`urpt_gcs.vehicle.transfer.until_verified`);
+what differs between them (messages, what a refusal means, ArduPilot's start-up wait) is
+said by a transfer object each.
 """
 
 from __future__ import annotations
@@ -27,9 +32,8 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal, Protocol
 
 from urpt_gcs.errors import LinkError, SettingsError
 from urpt_gcs.flight.geofence import Geofence, compare_fence, fence_items
@@ -41,59 +45,39 @@ from urpt_gcs.flight.mission import (
     command_name,
     upload_problem,
 )
+from urpt_gcs.flight.wire import Comparison, WireItem, wire_items
 from urpt_gcs.progress import Progress
-from urpt_gcs.vehicle.readback import WireItem, compare, wire_items
+from urpt_gcs.vehicle.mavsdk_link import connect
+from urpt_gcs.vehicle.protocol import (
+    DEFAULT_URL,
+    AutopilotKind,
+    FenceLink,
+    FenceRefused,
+    LinkTimeout,
+    MissionAndFenceLink,
+    MissionRejected,
+    UploadUnconfirmed,
+    VehicleLink,
+)
+from urpt_gcs.vehicle.readback import compare
+from urpt_gcs.vehicle.transfer import Stalled, StartingWait, until_stalled, until_verified
 
-DEFAULT_URL = "udpin://0.0.0.0:14550"
+__all__ = [
+    "READBACK_S_PER_ITEM",
+    "RETRYABLE",
+    "FenceReport",
+    "UploadReport",
+    "UploadSettings",
+    "refuse_unfit",
+    "upload",
+    "upload_async",
+    "upload_fence_verified",
+    "upload_verified",
+    "upload_with_fence",
+]
+
 READBACK_S_PER_ITEM = 1.0
-# A real ArduCopter SITL is ready about 2 s after its first client connects (0.15 s at 10x);
-# a board on a slow SD card can take several seconds more.
-STARTING_WAIT_S = 30.0
-STARTING_FIRST_PAUSE_S = 0.5
-STARTING_MAX_PAUSE_S = 4.0
-AutopilotKind = Literal["ardupilot", "px4", "unknown"]
 _NAMES = {"ardupilot": "ArduPilot", "px4": "PX4", "unknown": "an unknown autopilot"}
-
-
-class MissionRejected(LinkError):
-    """The vehicle refused the mission.
-
-    ``result`` is the MAV_MISSION_RESULT name, ``seq`` the item it refused (when known),
-    ``capacity`` the most items it holds (when it said so). ``starting`` is True for
-    ArduPilot's refusal while it boots ("Only 0 items are supported"), which says nothing of
-    its capacity.
-    """
-
-    def __init__(
-        self,
-        result: str,
-        detail: str = "",
-        capacity: int | None = None,
-        seq: int | None = None,
-        *,
-        starting: bool = False,
-    ) -> None:
-        super().__init__(f"{result}{': ' + detail if detail else ''}")
-        self.result = result
-        self.capacity = capacity
-        self.seq = seq
-        self.starting = starting
-
-
-class FenceRefused(MissionRejected):
-    """The vehicle does not take fences at all (it refused the fence mission outright)."""
-
-
-class LinkTimeout(LinkError):
-    """A transfer got no answer in time (a lossy or dropped link)."""
-
-
-class UploadUnconfirmed(LinkTimeout):
-    """The vehicle asked for every item, but its acceptance (MISSION_ACK) never came.
-
-    Most likely the acceptance was lost on the way: only a read-back can tell whether the
-    vehicle holds the mission.
-    """
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,55 +150,6 @@ class FenceReport:
     elapsed_s: float
 
 
-class VehicleLink(Protocol):
-    """What the uploader needs from a connected vehicle."""
-
-    url: str
-
-    async def autopilot(self) -> AutopilotKind:
-        """The autopilot the vehicle's heartbeat names."""
-        ...
-
-    async def wait_connected(self, timeout_s: float) -> None:
-        """Return once the vehicle is heard; LinkError after ``timeout_s``."""
-        ...
-
-    async def upload(self, items: Sequence[WireItem], progress: Callable[[float], None]) -> None:
-        """Send a mission; MissionRejected or LinkTimeout if it does not go through.
-
-        UploadUnconfirmed (a LinkTimeout) when every item was asked for but the vehicle's
-        acceptance did not come: the read-back then decides.
-        """
-        ...
-
-    async def download(self) -> list[WireItem]:
-        """Read the vehicle's mission back; LinkTimeout if it does not answer."""
-        ...
-
-    async def cancel(self) -> None:
-        """Abandon a transfer still running."""
-        ...
-
-
-class FenceLink(Protocol):
-    """What the fence upload needs from a connected vehicle."""
-
-    url: str
-
-    async def wait_connected(self, timeout_s: float) -> None:
-        """Return once the vehicle is heard; LinkError after ``timeout_s``."""
-        ...
-
-    async def upload_fence(self, items: Sequence[WireItem]) -> None:
-        """Send a fence mission; FenceRefused if the vehicle takes no fences, MissionRejected
-        for another refusal, LinkTimeout if it does not answer."""
-        ...
-
-    async def download_fence(self) -> list[WireItem]:
-        """Read the vehicle's fence back; LinkTimeout if it does not answer."""
-        ...
-
-
 async def upload_verified(
     link: VehicleLink,
     mission: Mission,
@@ -264,65 +199,20 @@ async def upload_verified(
             f"the mission was planned for {_NAMES[mission.firmware]} but the vehicle on "
             f"{link.url} runs {_NAMES[autopilot]}: plan it again with --firmware {autopilot}"
         )
-    items = wire_items(mission)
-    attempts = settings.retries + 1
-    problem = ""
-    refusal: MissionRejected | None = None
-    starting = _Starting(link.url)
-    attempt = 0
-    while attempt < attempts:
-        attempt += 1
-        if attempt > 1 and not starting.waiting:
-            say(f"retrying ({problem}): attempt {attempt} of {attempts}")
-        starting.waiting = False
-        refusal = None
-        try:
-            got = await _attempt(link, items, settings, say)
-        except LinkTimeout as exc:
-            problem = str(exc)
-            continue
-        except MissionRejected as exc:
-            if exc.starting:
-                # Not a failed attempt: the vehicle cannot take any mission yet.
-                attempt -= 1
-                await starting.pause(say)
-                continue
-            _check_refusal(exc, link.url, items)
-            refusal, problem = exc, f"the vehicle refused it with {exc}"
-            if attempt < attempts:
-                await asyncio.sleep(settings.busy_wait_s * attempt)
-            continue
-        check = compare(items, got, mission.firmware)
-        if check.equal:
-            warnings.extend(check.warnings)
-            home = _vehicle_home(got) if mission.firmware == "ardupilot" else None
-            warnings.extend(_home_warnings(mission, home))
-            return UploadReport(
-                url=link.url,
-                autopilot=autopilot,
-                firmware=mission.firmware,
-                items=len(items),
-                attempts=attempt,
-                elapsed_s=time.monotonic() - started,
-                vehicle_home=home,
-                warnings=tuple(warnings),
-            )
-        more = f" (and {len(check.mismatches) - 1} more)" if len(check.mismatches) > 1 else ""
-        problem = f"read-back differs: {check.mismatches[0]}{more}"
-    if refusal is not None:
-        cause = (
-            f"it may have no room for {len(items)} items, or still be starting (ArduPilot "
-            "refuses uploads for a few seconds after boot): wait and try again"
-            if refusal.result == "MAV_MISSION_NO_SPACE"
-            else "another ground station may be uploading to it: stop that and try again"
-        )
-        raise MissionRejected(
-            refusal.result,
-            f"the vehicle on {link.url} refused the mission on all {attempts} attempts: {cause}",
-        )
-    raise LinkError(
-        f"mission not verified on {link.url} after {attempts} attempts: {problem}; the "
-        "vehicle may hold a partial mission: do not fly it"
+    transfer = _MissionTransfer(link, wire_items(mission), mission.firmware, settings, say)
+    got, check, attempt = await until_verified(transfer, settings.retries, settings.busy_wait_s)
+    warnings.extend(check.warnings)
+    home = _vehicle_home(got) if mission.firmware == "ardupilot" else None
+    warnings.extend(_home_warnings(mission, home))
+    return UploadReport(
+        url=link.url,
+        autopilot=autopilot,
+        firmware=mission.firmware,
+        items=len(transfer.items),
+        attempts=attempt,
+        elapsed_s=time.monotonic() - started,
+        vehicle_home=home,
+        warnings=tuple(warnings),
     )
 
 
@@ -363,74 +253,130 @@ async def upload_fence_verified(
     settings = settings or UploadSettings()
     say = progress or (lambda _msg: None)
     started = time.monotonic()
-    items = fence_items(fence)
-    attempts = settings.retries + 1
-    problem = ""
-    for attempt in range(1, attempts + 1):
-        say(
-            f"uploading the geofence ({fence.describe()})"
+    transfer = _FenceTransfer(link, fence, fence_items(fence), firmware, settings, say)
+    _got, _check, attempt = await until_verified(transfer, settings.retries, settings.busy_wait_s)
+    return FenceReport(fence.describe(), len(transfer.items), attempt, time.monotonic() - started)
+
+
+class _MissionTransfer:
+    """The mission: progress in tenths, read back up to ``readback_tries`` times per attempt;
+    ArduPilot's refusals while it boots are waited out and not counted."""
+
+    differs = "read-back differs"
+    pause_after_last = False
+
+    def __init__(
+        self,
+        link: VehicleLink,
+        items: Sequence[WireItem],
+        firmware: Firmware,
+        settings: UploadSettings,
+        say: Progress,
+    ) -> None:
+        self.link = link
+        self.items = items
+        self.firmware = firmware
+        self.settings = settings
+        self.say = say
+        self._starting = StartingWait(link.url)
+
+    def announce(self, attempt: int, attempts: int, problem: str) -> None:
+        if attempt > 1 and not self._starting.waiting:
+            self.say(f"retrying ({problem}): attempt {attempt} of {attempts}")
+        self._starting.waiting = False
+
+    async def attempt(self) -> list[WireItem]:
+        return await _attempt(self.link, self.items, self.settings, self.say)
+
+    async def starting(self, refusal: MissionRejected) -> bool:
+        if not refusal.starting:
+            return False
+        # Not a failed attempt: the vehicle cannot take any mission yet.
+        await self._starting.pause(self.say)
+        return True
+
+    def refused(self, refusal: MissionRejected) -> None:
+        _check_refusal(refusal, self.link.url, self.items)
+
+    def compare(self, got: Sequence[WireItem]) -> Comparison:
+        return compare(self.items, got, self.firmware)
+
+    def gave_up(self, attempts: int, problem: str, refusal: MissionRejected | None) -> LinkError:
+        url = self.link.url
+        if refusal is not None:
+            cause = (
+                f"it may have no room for {len(self.items)} items, or still be starting "
+                "(ArduPilot refuses uploads for a few seconds after boot): wait and try again"
+                if refusal.result == "MAV_MISSION_NO_SPACE"
+                else "another ground station may be uploading to it: stop that and try again"
+            )
+            return MissionRejected(
+                refusal.result,
+                f"the vehicle on {url} refused the mission on all {attempts} attempts: {cause}",
+            )
+        return LinkError(
+            f"mission not verified on {url} after {attempts} attempts: {problem}; the "
+            "vehicle may hold a partial mission: do not fly it"
+        )
+
+
+class _FenceTransfer:
+    """The geofence: one upload and one read-back per attempt; a vehicle that keeps no fences
+    (:class:`FenceRefused`) ends it at once."""
+
+    differs = "fence read-back differs"
+    pause_after_last = True
+
+    def __init__(
+        self,
+        link: FenceLink,
+        fence: Geofence,
+        items: Sequence[WireItem],
+        firmware: Firmware,
+        settings: UploadSettings,
+        say: Progress,
+    ) -> None:
+        self.link = link
+        self.fence = fence
+        self.items = items
+        self.firmware = firmware
+        self.settings = settings
+        self.say = say
+
+    def announce(self, attempt: int, attempts: int, problem: str) -> None:
+        self.say(
+            f"uploading the geofence ({self.fence.describe()})"
             + (f" ({problem}): attempt {attempt} of {attempts}" if attempt > 1 else "")
         )
-        await link.wait_connected(settings.timeout_s)
-        try:
-            await link.upload_fence(items)
-        except FenceRefused:
-            raise
-        except MissionRejected as exc:
-            if exc.result not in RETRYABLE:
-                raise MissionRejected(
-                    exc.result,
-                    f"the vehicle on {link.url} refused the geofence ({fence.describe()}): "
-                    "simplify the fence or check the vehicle's FENCE_* parameters",
-                ) from None
-            problem = f"the vehicle refused it with {exc}"
-            await asyncio.sleep(settings.busy_wait_s * attempt)
-            continue
-        except LinkTimeout as exc:
-            problem = str(exc)
-            continue
-        say("reading the geofence back")
-        try:
-            got = await link.download_fence()
-        except LinkTimeout as exc:
-            problem = str(exc)
-            continue
-        check = compare_fence(items, got, firmware)
-        if check.equal:
-            return FenceReport(fence.describe(), len(items), attempt, time.monotonic() - started)
-        more = f" (and {len(check.mismatches) - 1} more)" if len(check.mismatches) > 1 else ""
-        problem = f"fence read-back differs: {check.mismatches[0]}{more}"
-    raise LinkError(
-        f"geofence not verified on {link.url} after {attempts} attempts: {problem}; the "
-        "vehicle may hold a partial fence: do not fly until it is uploaded"
-    )
 
+    async def attempt(self) -> list[WireItem]:
+        await self.link.wait_connected(self.settings.timeout_s)
+        await self.link.upload_fence(self.items)
+        self.say("reading the geofence back")
+        return await self.link.download_fence()
 
-class _Starting:
-    """Waits out ArduPilot's start-up refusals with a growing pause, up to STARTING_WAIT_S."""
+    async def starting(self, refusal: MissionRejected) -> bool:
+        return False
 
-    def __init__(self, url: str) -> None:
-        self.url = url
-        self.waiting = False
-        self._since: float | None = None
-        self._pause_s = STARTING_FIRST_PAUSE_S
-
-    async def pause(self, say: Progress) -> None:
-        now = time.monotonic()
-        if self._since is None:
-            self._since = now
-        if now - self._since > STARTING_WAIT_S:
+    def refused(self, refusal: MissionRejected) -> None:
+        if isinstance(refusal, FenceRefused):
+            raise refusal
+        if refusal.result not in RETRYABLE:
             raise MissionRejected(
-                "MAV_MISSION_NO_SPACE",
-                f"the vehicle on {self.url} is still starting after {STARTING_WAIT_S:g} s (it "
-                "says 'Only 0 items are supported' until its mission storage is up): wait for "
-                "'ArduPilot Ready' and upload again",
-                starting=True,
-            )
-        self.waiting = True
-        say(f"the vehicle is still starting: trying again in {self._pause_s:g} s")
-        await asyncio.sleep(self._pause_s)
-        self._pause_s = min(self._pause_s * 2.0, STARTING_MAX_PAUSE_S)
+                refusal.result,
+                f"the vehicle on {self.link.url} refused the geofence "
+                f"({self.fence.describe()}): simplify the fence or check the vehicle's FENCE_* "
+                "parameters",
+            ) from None
+
+    def compare(self, got: Sequence[WireItem]) -> Comparison:
+        return compare_fence(self.items, got, self.firmware)
+
+    def gave_up(self, attempts: int, problem: str, refusal: MissionRejected | None) -> LinkError:
+        return LinkError(
+            f"geofence not verified on {self.link.url} after {attempts} attempts: {problem}; "
+            "the vehicle may hold a partial fence: do not fly until it is uploaded"
+        )
 
 
 def refuse_unfit(mission: Mission) -> None:
@@ -498,11 +444,11 @@ async def _attempt(
 
     await link.wait_connected(settings.timeout_s)
     try:
-        await _until_stalled(link.upload(items, on_progress), heard, settings.transfer_timeout_s)
+        await until_stalled(link.upload(items, on_progress), heard, settings.transfer_timeout_s)
     except UploadUnconfirmed as exc:
         # Success still needs the read-back below to match item for item.
         say(f"{exc}: reading the mission back to check")
-    except _Stalled:
+    except Stalled:
         await link.cancel()
         raise LinkTimeout(
             f"the upload made no progress for {settings.transfer_timeout_s:g} s"
@@ -522,31 +468,6 @@ async def _attempt(
         except LinkTimeout as exc:
             problem = str(exc)
     raise LinkTimeout(problem)
-
-
-class _Stalled(Exception):
-    """A transfer made no progress for too long."""
-
-
-async def _until_stalled(
-    transfer: Coroutine[Any, Any, None], heard: list[float], stall_s: float
-) -> None:
-    """Run ``transfer``, cancelled with _Stalled once ``heard[0]`` (its last progress) is
-    ``stall_s`` old."""
-    task = asyncio.ensure_future(transfer)
-    try:
-        while True:
-            left = heard[0] + stall_s - time.monotonic()
-            if left <= 0.0:
-                raise _Stalled
-            done, _pending = await asyncio.wait({task}, timeout=left)
-            if done:
-                task.result()
-                return
-    finally:
-        if not task.done():
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
 
 
 def _vehicle_home(got: Sequence[WireItem]) -> GeoPoint | None:
@@ -589,15 +510,9 @@ async def upload_async(
     settings = settings or UploadSettings()
     say = progress or (lambda _msg: None)
     refuse_unfit(mission)  # before a connection is even tried
-    from urpt_gcs.vehicle.mavsdk_link import connect
-
     say(f"waiting for an autopilot on {url}")
     async with connect(url, settings.timeout_s) as link:
         return await upload_with_fence(link, mission, settings, progress, fence)
-
-
-class MissionAndFenceLink(VehicleLink, FenceLink, Protocol):
-    """A vehicle that takes missions and fences."""
 
 
 async def upload_with_fence(

@@ -1,4 +1,4 @@
-"""MAVSDK 4.x as the drone link: :class:`MavsdkLink`, a :class:`~urpt_gcs.vehicle.link.VehicleLink`.
+"""MAVSDK 4.x as the drone link: :class:`MavsdkLink`, a `VehicleLink` and a `FenceLink`.
 
 Missions go through ``mission_raw`` (items exactly as given, no home added or removed).
 ``mavlink_direct`` watches MISSION_ACK and STATUSTEXT during an upload, so a refusal is
@@ -8,7 +8,7 @@ ArduPilot's explanation ("Only 700 items are supported"). MAVSDK's log goes to t
 
 On a lossy link (see :data:`UPLOAD_TIMEOUT_S`) MAVSDK's answer timeout is raised for uploads,
 and an upload whose every item the vehicle asked for but whose acceptance never came is
-reported as :class:`~urpt_gcs.vehicle.link.UploadUnconfirmed`, for the read-back to settle.
+reported as :class:`~urpt_gcs.vehicle.protocol.UploadUnconfirmed`, for the read-back to settle.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import functools
 import json
 import logging
 import time
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Coroutine, Sequence
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -36,7 +36,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import LinkError
 from urpt_gcs.flight.geofence import FENCE_TYPE
-from urpt_gcs.vehicle.link import (
+from urpt_gcs.flight.wire import WireItem
+from urpt_gcs.vehicle.protocol import (
     DEFAULT_URL,
     AutopilotKind,
     FenceRefused,
@@ -44,8 +45,19 @@ from urpt_gcs.vehicle.link import (
     MissionRejected,
     UploadUnconfirmed,
 )
-from urpt_gcs.vehicle.readback import WireItem
 
+__all__ = [
+    "DOWNLOAD_TIMEOUT_S",
+    "FINAL_ACK_WAIT_S",
+    "REFUSAL_TEXT_WAIT_S",
+    "UPLOAD_TIMEOUT_S",
+    "MavsdkLink",
+    "connect",
+    "connect_systems",
+]
+
+# A message heard during a transfer: when (monotonic seconds) and its fields.
+_Heard = tuple[float, dict[str, Any]]
 # ArduPilot sends its explanation (STATUSTEXT) just after the MISSION_ACK.
 REFUSAL_TEXT_WAIT_S = 0.3
 # How long MAVSDK waits for each answer in a mission transfer, set through the C library's
@@ -151,7 +163,28 @@ class MavsdkLink:
         if handle:
             setter(handle, ctypes.c_double(seconds))
 
-    async def _watch(self, name: str, into: list[tuple[float, dict[str, Any]]]) -> None:
+    @asynccontextmanager
+    async def _uploading(
+        self,
+        watched: Sequence[tuple[str, list[_Heard]]],
+        *helpers: Coroutine[Any, Any, None],
+    ) -> AsyncIterator[None]:
+        """Around an upload (mission or fence): collect the messages ``watched`` names, each
+        into its list, run ``helpers`` beside it, and give MAVSDK the upload's answer timeout;
+        afterwards stop them all and set the download timeout back."""
+        watchers = [asyncio.create_task(self._watch(name, into)) for name, into in watched]
+        watchers += [asyncio.create_task(helper) for helper in helpers]
+        await asyncio.sleep(0)  # let the subscriptions start before the first packet
+        self.set_transfer_timeout(UPLOAD_TIMEOUT_S)
+        try:
+            yield
+        finally:
+            self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
+            for watcher in watchers:
+                watcher.cancel()
+            await asyncio.gather(*watchers, return_exceptions=True)
+
+    async def _watch(self, name: str, into: list[_Heard]) -> None:
         messages = self.direct.subscribe_message(name)
         try:
             async for message in messages:
@@ -162,8 +195,8 @@ class MavsdkLink:
     async def _stop_when_acceptance_lost(
         self,
         last_seq: int,
-        requests: list[tuple[float, dict[str, Any]]],
-        acks: list[tuple[float, dict[str, Any]]],
+        requests: list[_Heard],
+        acks: list[_Heard],
         gave_up: asyncio.Event,
     ) -> None:
         """Cancel MAVSDK's wait for a MISSION_ACK the vehicle has most likely sent and lost."""
@@ -185,46 +218,36 @@ class MavsdkLink:
         LinkTimeout when the vehicle stops answering; UploadUnconfirmed when it asked for every
         item but its acceptance did not come.
         """
-        acks: list[tuple[float, dict[str, Any]]] = []
-        texts: list[tuple[float, dict[str, Any]]] = []
-        requests: list[tuple[float, dict[str, Any]]] = []
-        watchers = [
-            asyncio.create_task(self._watch("MISSION_ACK", acks)),
-            asyncio.create_task(self._watch("STATUSTEXT", texts)),
-            asyncio.create_task(self._watch("MISSION_REQUEST", requests)),
-            asyncio.create_task(self._watch("MISSION_REQUEST_INT", requests)),
-        ]
+        acks: list[_Heard] = []
+        texts: list[_Heard] = []
+        requests: list[_Heard] = []
         gave_up = asyncio.Event()
-        watchers.append(
-            asyncio.create_task(
-                self._stop_when_acceptance_lost(len(items) - 1, requests, acks, gave_up)
-            )
-        )
-        await asyncio.sleep(0)  # let the subscriptions start before the first packet
+        watched = [
+            ("MISSION_ACK", acks),
+            ("STATUSTEXT", texts),
+            ("MISSION_REQUEST", requests),
+            ("MISSION_REQUEST_INT", requests),
+        ]
+        stopper = self._stop_when_acceptance_lost(len(items) - 1, requests, acks, gave_up)
         plan = MissionPlan([_to_mavsdk(item) for item in items])
-        self.set_transfer_timeout(UPLOAD_TIMEOUT_S)
-        try:
-            async for _result, data in self.mission.upload_mission_with_progress(plan):
-                progress(float(data.progress))
-        except MissionRawError as exc:
-            lost = exc.result == MissionRawResult.TIMEOUT or (
-                exc.result == MissionRawResult.TRANSFER_CANCELLED and gave_up.is_set()
-            )
-            if lost and any(r.get("seq") == len(items) - 1 for _t, r in requests):
-                raise UploadUnconfirmed(
-                    f"the vehicle on {self.url} asked for all {len(items)} items but its "
-                    "acceptance did not come"
-                ) from None
-            if lost:
-                raise LinkTimeout(f"no answer from the vehicle on {self.url}") from None
-            await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
-            last = requests[-1][1].get("seq") if requests else None
-            raise _rejection(exc.result, acks, texts, last) from None
-        finally:
-            self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
-            for watcher in watchers:
-                watcher.cancel()
-            await asyncio.gather(*watchers, return_exceptions=True)
+        async with self._uploading(watched, stopper):
+            try:
+                async for _result, data in self.mission.upload_mission_with_progress(plan):
+                    progress(float(data.progress))
+            except MissionRawError as exc:
+                lost = exc.result == MissionRawResult.TIMEOUT or (
+                    exc.result == MissionRawResult.TRANSFER_CANCELLED and gave_up.is_set()
+                )
+                if lost and any(r.get("seq") == len(items) - 1 for _t, r in requests):
+                    raise UploadUnconfirmed(
+                        f"the vehicle on {self.url} asked for all {len(items)} items but its "
+                        "acceptance did not come"
+                    ) from None
+                if lost:
+                    raise LinkTimeout(f"no answer from the vehicle on {self.url}") from None
+                await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
+                last = requests[-1][1].get("seq") if requests else None
+                raise _rejection(exc.result, acks, texts, last) from None
 
     async def download(self) -> list[WireItem]:
         """The vehicle's mission, as MISSION_ITEM_INT items."""
@@ -245,30 +268,20 @@ class MavsdkLink:
         FenceRefused when the vehicle answers MAV_MISSION_UNSUPPORTED (it keeps no fences),
         MissionRejected for another refusal, LinkTimeout when it does not answer.
         """
-        acks: list[tuple[float, dict[str, Any]]] = []
-        texts: list[tuple[float, dict[str, Any]]] = []
-        watchers = [
-            asyncio.create_task(self._watch("MISSION_ACK", acks)),
-            asyncio.create_task(self._watch("STATUSTEXT", texts)),
-        ]
-        await asyncio.sleep(0)
-        self.set_transfer_timeout(UPLOAD_TIMEOUT_S)
-        try:
-            await self.mission.upload_geofence([_to_mavsdk(item) for item in items])
-        except MissionRawError as exc:
-            if exc.result == MissionRawResult.TIMEOUT:
-                raise LinkTimeout(f"no answer to the geofence upload on {self.url}") from None
-            await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
-            fence_acks = [(t, a) for t, a in acks if a.get("mission_type") == FENCE_TYPE]
-            refusal = _rejection(exc.result, fence_acks, texts, None)
-            if refusal.result == "MAV_MISSION_UNSUPPORTED":
-                raise FenceRefused(refusal.result, "the vehicle keeps no geofence") from None
-            raise refusal from None
-        finally:
-            self.set_transfer_timeout(DOWNLOAD_TIMEOUT_S)
-            for watcher in watchers:
-                watcher.cancel()
-            await asyncio.gather(*watchers, return_exceptions=True)
+        acks: list[_Heard] = []
+        texts: list[_Heard] = []
+        async with self._uploading([("MISSION_ACK", acks), ("STATUSTEXT", texts)]):
+            try:
+                await self.mission.upload_geofence([_to_mavsdk(item) for item in items])
+            except MissionRawError as exc:
+                if exc.result == MissionRawResult.TIMEOUT:
+                    raise LinkTimeout(f"no answer to the geofence upload on {self.url}") from None
+                await asyncio.sleep(REFUSAL_TEXT_WAIT_S)
+                fence_acks = [(t, a) for t, a in acks if a.get("mission_type") == FENCE_TYPE]
+                refusal = _rejection(exc.result, fence_acks, texts, None)
+                if refusal.result == "MAV_MISSION_UNSUPPORTED":
+                    raise FenceRefused(refusal.result, "the vehicle keeps no geofence") from None
+                raise refusal from None
 
     async def download_fence(self) -> list[WireItem]:
         """The vehicle's fence mission (``mission_raw.download_geofence``)."""
@@ -310,8 +323,8 @@ def _from_mavsdk(item: MavsdkItem) -> WireItem:
 
 def _rejection(
     result: MissionRawResult,
-    acks: list[tuple[float, dict[str, Any]]],
-    texts: list[tuple[float, dict[str, Any]]],
+    acks: list[_Heard],
+    texts: list[_Heard],
     seq: int | None,
 ) -> MissionRejected:
     refusals = [ack["type"] for _t, ack in acks if ack.get("type") != mavlink.MAV_MISSION_ACCEPTED]

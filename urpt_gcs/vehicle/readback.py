@@ -1,4 +1,4 @@
-"""Mission items as they travel (MISSION_ITEM_INT), and the check of a vehicle's read-back.
+"""The check of a vehicle's read-back: is the mission it holds the one that was sent?
 
 An autopilot does not hand a mission back exactly as it was sent. What a real ArduPilot was
 seen to change (``../shared/FACTS.md``) is treated as equal:
@@ -38,55 +38,12 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.flight.mission import Firmware, Mission, command_name
+from urpt_gcs.flight.mission import Firmware, command_name
+from urpt_gcs.flight.wire import Comparison, WireItem
+
+__all__ = ["ALTITUDE_TOLERANCE_M", "HEADING_TOLERANCE_DEG", "Store", "compare"]
 
 ALTITUDE_TOLERANCE_M = 0.01 + 1e-4
-MISSION_TYPE = mavlink.MAV_MISSION_TYPE_MISSION
-
-
-@dataclass(frozen=True, slots=True)
-class WireItem:
-    """One MISSION_ITEM_INT: x and y are degrees * 1e7 for a global frame."""
-
-    seq: int
-    frame: int
-    command: int
-    current: int
-    autocontinue: int
-    param1: float
-    param2: float
-    param3: float
-    param4: float
-    x: int
-    y: int
-    z: float
-    mission_type: int = MISSION_TYPE
-
-    @property
-    def params(self) -> tuple[float, float, float, float]:
-        """param1..param4."""
-        return (self.param1, self.param2, self.param3, self.param4)
-
-
-def wire_items(mission: Mission) -> tuple[WireItem, ...]:
-    """The items to upload, seq from 0, the first one ``current`` (as MAVSDK requires)."""
-    return tuple(
-        WireItem(
-            seq=seq,
-            frame=item.frame,
-            command=item.command,
-            current=1 if seq == 0 else 0,
-            autocontinue=int(item.autocontinue),
-            param1=item.params[0],
-            param2=item.params[1],
-            param3=item.params[2],
-            param4=item.params[3],
-            x=item.x_int,
-            y=item.y_int,
-            z=item.z,
-        )
-        for seq, item in enumerate(mission.upload_items())
-    )
 
 
 # --- ArduPilot's storage of the commands a survey mission uses ------------------------------
@@ -189,19 +146,6 @@ def _same_param(sent: float, got: float) -> bool:
     if math.isnan(sent) or math.isnan(got):
         return math.isnan(sent) and math.isnan(got)
     return _f32(sent) == _f32(got)
-
-
-@dataclass(frozen=True, slots=True)
-class Comparison:
-    """The outcome of comparing a read-back with what was sent."""
-
-    mismatches: tuple[str, ...]
-    warnings: tuple[str, ...]
-
-    @property
-    def equal(self) -> bool:
-        """True when nothing that matters differs."""
-        return not self.mismatches
 
 
 def compare(sent: Sequence[WireItem], got: Sequence[WireItem], firmware: Firmware) -> Comparison:
