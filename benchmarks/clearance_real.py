@@ -5,7 +5,7 @@
 For each raster beside the checkout (``../shared/dem``), plans targets placed as the tests
 place them, writes the mission, and compares per leg: the clearance the plan reports (exact
 on the bilinear surface), the one dense independent samples of the written ``.waypoints``
-give (``tests/independent.py``, every 1/256 cell), and what sampling every half cell along
+give (``tests/support/independent.py``, every 1/256 cell), and what sampling every half cell along
 the leg, as the tool once did, would have reported.
 """
 

@@ -8,7 +8,7 @@ Line 0 is home for both firmwares, as Mission Planner, QGroundControl and pymavl
 ``MAVWPLoader`` expect: frame GLOBAL, NAV_WAYPOINT, AMSL altitude, ``current`` 1 (Mission
 Planner marks home that way; pymavlink keeps the flag and MAVSDK's importer resets it). The
 mission items follow with seq 1..n. MAVSDK's importer turns that line into items of its own
-(see ``tests/test_formats.py``), so upload :meth:`Mission.upload_items`, never this file.
+(see ``tests/files/test_formats.py``), so upload :meth:`Mission.upload_items`, never this file.
 """
 
 from __future__ import annotations

@@ -22,9 +22,9 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, SHARED
-from mavlink_peer import split_frames
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support.mavlink_peer import split_frames
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import LinkError, SettingsError

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO
-from simulated import DEMO_PLAN, demo_mission
+from support.simulated import DEMO_PLAN, demo_mission
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import LinkError, SettingsError

@@ -15,8 +15,8 @@ import pytest
 from click.testing import CliRunner
 from conftest import DEMO, REAL_DEMS, needs_shared
 from distributed import Client
-from independent import check_mission
-from test_plan import _kml_targets, _valid_targets
+from support.independent import check_mission
+from support.targets import kml_targets, valid_targets
 
 from urpt_gcs.batch.cluster import map_jobs, open_client
 from urpt_gcs.batch.jobs import PLAN_KEYS, check_inputs, read_jobs, run_batch
@@ -229,15 +229,15 @@ def test_three_sites_on_two_workers_equal_serial_plans_and_pass_the_check(
     odm = REAL_DEMS / "odm_dsm_utm51n.tif"
     codem = REAL_DEMS / "codem_aoi_dsm_utm16n_egm2008.tif"
     points = {
-        "odm": _valid_targets(odm, 5, seed=11),
-        "codem": _valid_targets(codem, 4, seed=12),
+        "odm": valid_targets(odm, 5, seed=11),
+        "codem": valid_targets(codem, 4, seed=12),
     }
     for name, targets in points.items():
         _write(
             tmp_path / f"{name}.csv",
             "name,lat,lon\n" + "".join(f"{n},{a:.9f},{o:.9f}\n" for n, a, o in targets),
         )
-    points["demo"] = _kml_targets(DEMO / "targets.kml")
+    points["demo"] = kml_targets(DEMO / "targets.kml")
     # The time limit bounds the searches, which end on their own well before it: a plan is
     # then a function of its inputs, wherever it runs.
     jobs_file = _write(
@@ -361,7 +361,7 @@ def test_paper_bench_on_the_cluster_equals_the_serial_run(client: Client) -> Non
 
 
 def test_the_readme_jobs_file_reads_as_it_says(tmp_path: Path) -> None:
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
     blocks = re.findall(r"^```toml\n(.*?)^```", readme, re.DOTALL | re.MULTILINE)
     block = [b for b in blocks if "[[site]]" in b]
     assert len(block) == 1
@@ -372,7 +372,7 @@ def test_the_readme_jobs_file_reads_as_it_says(tmp_path: Path) -> None:
 
 
 def test_cli_on_a_running_scheduler(tmp_path: Path, client: Client) -> None:
-    points = _kml_targets(DEMO / "targets.kml")[:4]
+    points = kml_targets(DEMO / "targets.kml")[:4]
     _write(
         tmp_path / "four.csv",
         "name,lat,lon\n" + "".join(f"{n},{a:.9f},{o:.9f}\n" for n, a, o in points),

@@ -8,7 +8,7 @@ import numpy as np
 import pyproj
 import pytest
 import rasterio
-from independent import load_raster, sees
+from support.independent import load_raster, sees
 
 from urpt_gcs.bench.paper import paper_instance, random_targets, tin_terrain
 from urpt_gcs.solvers import SOLVERS, SolveSettings, solve

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from urpt_gcs.errors import TargetsError
 from urpt_gcs.site.targets import Target, TargetSet, read_targets
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 TARGETS = DATA / "targets"
 BAD = DATA / "bad"
 

@@ -27,11 +27,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mavlink_peer import mavsdk_autopilot
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 from mavsdk.autopilot import Autopilot
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support.mavlink_peer import mavsdk_autopilot
 
 import urpt_gcs.files.formats as formats
 from urpt_gcs.errors import MissionFileError

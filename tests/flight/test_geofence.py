@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from simulated import DEMO_PLAN
+from support.simulated import DEMO_PLAN
 
 from urpt_gcs.errors import LinkError, MissionFileError
 from urpt_gcs.flight.geofence import (

@@ -30,7 +30,7 @@ from conftest import DEMO
 from urpt_gcs.cli import main
 from urpt_gcs.site.inputs import TARGETS_MAX_BYTES
 
-BAD = Path(__file__).resolve().parent / "data" / "bad"
+BAD = Path(__file__).resolve().parents[1] / "data" / "bad"
 SITE = str(DEMO / "site.tif")
 TARGETS = str(DEMO / "targets.kml")
 

@@ -19,8 +19,8 @@ import numpy as np
 import pyproj
 import pytest
 from conftest import WriteDem
-from independent import check_mission
 from scipy.ndimage import map_coordinates
+from support.independent import check_mission
 
 from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.files.products import write_products

@@ -1,5 +1,6 @@
 """Frame cameras: the frame's footprint turned by the heading, the GSD cap, the mission's
-turns, and plans checked independently (tests/independent.py) against the written mission."""
+turns, and plans checked independently (tests/support/independent.py) against the written
+mission."""
 
 from __future__ import annotations
 
@@ -13,9 +14,15 @@ import pyproj
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, REAL_DEMS, needs_shared
-from independent import FrameCamera, check_mission, load_raster, read_waypoints_file, sees_in_frame
 from pymavlink import mavutil
-from test_plan import _kml_targets, _valid_targets
+from support.independent import (
+    FrameCamera,
+    check_mission,
+    load_raster,
+    read_waypoints_file,
+    sees_in_frame,
+)
+from support.targets import kml_targets, valid_targets
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import SettingsError
@@ -194,7 +201,7 @@ def test_demo_every_target_inside_the_turned_frame_of_a_photo(tmp_path: Path) ->
     written .waypoints on the ellipsoid; and each stop holds its own targets from anywhere
     within the position tolerance, at its heading."""
     settings = PlanSettings(solve=FAST, frame=CAMERAS["phantom4rtk"].frame, gsd_cm=3.0)
-    targets = _kml_targets(DEMO / "targets.kml")
+    targets = kml_targets(DEMO / "targets.kml")
     _, files, problems = _framed_plan_checked(
         DEMO / "site.tif", DEMO / "targets.kml", targets, tmp_path, settings
     )
@@ -226,7 +233,7 @@ def test_the_independent_check_catches_a_wrong_heading(tmp_path: Path) -> None:
     """The same written mission turned by 90 degrees at every photo misses targets: the
     check reads the frame at the commanded heading, not any heading."""
     settings = PlanSettings(solve=FAST, frame=CAMERAS["phantom4rtk"].frame, gsd_cm=3.0)
-    targets = _kml_targets(DEMO / "targets.kml")
+    targets = kml_targets(DEMO / "targets.kml")
     _, files, problems = _framed_plan_checked(
         DEMO / "site.tif", DEMO / "targets.kml", targets, tmp_path, settings
     )
@@ -247,7 +254,7 @@ def test_the_independent_check_catches_a_wrong_heading(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", ["odm_dsm_utm51n.tif", "codem_aoi_dsm_utm16n_egm2008.tif"])
 def test_real_rasters_every_target_inside_the_turned_frame(tmp_path: Path, name: str) -> None:
     dem = REAL_DEMS / name
-    targets = _valid_targets(dem, 8, seed=5)
+    targets = valid_targets(dem, 8, seed=5)
     csv = tmp_path / "targets.csv"
     csv.write_text(
         "name,lat,lon\n" + "".join(f"{n},{lat:.9f},{lon:.9f}\n" for n, lat, lon in targets)
@@ -335,7 +342,7 @@ def test_altitude_auto_keeps_the_shortest_flight_of_its_range(tmp_path: Path) ->
     raster = load_raster(DEMO / "site.tif")
     lowest = min(
         float(raster.height(np.array([lon]), np.array([lat]))[0])
-        for _, lat, lon in _kml_targets(DEMO / "targets.kml")
+        for _, lat, lon in kml_targets(DEMO / "targets.kml")
     )
     far = 0.03 * 8.8 / max(13.2 / 5472, 8.8 / 3648)
     altitudes = sorted(times)

@@ -22,9 +22,9 @@ import pyproj
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, SHARED
-from mavlink_peer import split_frames
 from mavsdk.plugins.mission_raw import MissionItem as MavsdkItem
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support.mavlink_peer import split_frames
 
 from urpt_gcs.cli import main
 from urpt_gcs.flight.mission import Mission, waypoint_positions

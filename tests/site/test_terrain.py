@@ -430,7 +430,7 @@ def test_valid_range_applies_to_metres_not_to_stored_feet(write_dem: WriteDem) -
 def test_a_raster_without_georeferencing_is_refused_without_a_warning(
     name: str, words: str
 ) -> None:
-    path = Path(__file__).resolve().parent / "data" / "bad" / name
+    path = Path(__file__).resolve().parents[1] / "data" / "bad" / name
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(DemError, match=words):

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, REAL_DEMS, needs_shared
-from independent import check_mission, load_raster, read_waypoints_file
-from test_plan import _valid_targets
+from support.independent import check_mission, load_raster, read_waypoints_file
+from support.targets import valid_targets
 
 from urpt_gcs.cli import main
 from urpt_gcs.pipeline.separation import Track, closest, pair_closest, timing_slack_s
@@ -352,7 +352,7 @@ def test_one_vehicle_is_the_plain_plan(monkeypatch: pytest.MonkeyPatch, tmp_path
 @needs_shared(REAL_DEMS)
 def test_real_raster_fleet(tmp_path: Path) -> None:
     dem = REAL_DEMS / "odm_dsm_utm51n.tif"
-    targets = _valid_targets(dem, 10, seed=3)
+    targets = valid_targets(dem, 10, seed=3)
     csv = tmp_path / "targets.csv"
     csv.write_text(
         "name,lat,lon\n" + "".join(f"{n},{lat:.9f},{lon:.9f}\n" for n, lat, lon in targets)

@@ -21,7 +21,7 @@ from conftest import DEMO
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from simulated import DEMO_PLAN, demo_mission, simulated
+from support.simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import LinkError, SettingsError

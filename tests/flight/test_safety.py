@@ -14,8 +14,8 @@ import shapely
 from click.testing import CliRunner
 from conftest import DEMO, WriteDem, grid_xy
 from fastkml import kml as fastkml
-from independent import check_mission, leg_clearances, load_raster, read_waypoints_file
 from shapely.geometry import Point, shape
+from support.independent import check_mission, leg_clearances, load_raster, read_waypoints_file
 
 from urpt_gcs.cli import main
 from urpt_gcs.errors import PlanError

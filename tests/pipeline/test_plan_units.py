@@ -19,7 +19,7 @@ import rasterio
 import rasterio.warp
 from click.testing import CliRunner
 from conftest import DEMO, WriteDem
-from independent import check_mission, load_raster, read_waypoints_file, sees
+from support.independent import check_mission, load_raster, read_waypoints_file, sees
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.products import write_products

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from conftest import DEMO
 from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from simulated import DEMO_PLAN, demo_mission, simulated
+from support.simulated import DEMO_PLAN, demo_mission, simulated
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.formats import waypoints_text
@@ -457,7 +457,7 @@ def test_replay_flies_the_estimated_flight_time(name: str) -> None:
 
 
 def test_replay_verdict_agrees_with_the_independent_checker() -> None:
-    """Each photo the replay names as seeing a target also sees it for tests/independent.py
+    """Each photo the replay names as seeing a target also sees it for tests/support/independent.py
     (its own raster reading, interpolation and geodesy)."""
     from independent import load_raster, sees
 

@@ -1,6 +1,6 @@
 """A fleet on the link: upload --fleet and sitl replay --fleet.
 
-Fleet folders are built by tests/fleet_helpers.py from single-vehicle plans of the demo.
+Fleet folders are built by tests/support/fleet_helpers.py from single-vehicle plans of the demo.
 What the vehicles hold is read back by pymavlink (or from the simulated copter's store) and
 compared with the .waypoints parsed by pymavlink's mavwp; the closest approach is recomputed
 from the raw tracks with a flat-earth distance of its own.
@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from conftest import DEMO, SHARED
-from fleet_helpers import HOME_EAST, SITE, TARGETS, Vehicle, build_fleet
 from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from scipy.ndimage import minimum_filter1d
+from support.fleet_helpers import HOME_EAST, SITE, TARGETS, Vehicle, build_fleet
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.fleet_folder import read_fleet
@@ -286,7 +286,7 @@ def independent_closest(
 
 
 def _check_targets_independently(report: FleetReport) -> None:
-    """Every target, each from the photo the judge names, also for tests/independent.py."""
+    """Every target, each from the photo the judge names, also for tests/support/independent.py."""
     from independent import load_raster, sees
 
     raster = load_raster(SITE)

@@ -8,29 +8,23 @@ from pathlib import Path
 import numpy as np
 import pyproj
 import pytest
-import rasterio
 from conftest import DEMO, REAL_DEMS, needs_shared
-from independent import (
+from pymavlink import mavutil
+from support.independent import (
     check_mission,
     leg_clearances,
     load_raster,
     read_waypoints_file,
     sees,
 )
-from pymavlink import mavutil
+from support.targets import kml_targets, valid_targets
 
 from urpt_gcs.files.products import write_products
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
-from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import SolveSettings
 
 FAST = SolveSettings(time_limit_s=1.0)
-
-
-def _kml_targets(path: Path) -> list[tuple[str, float, float]]:
-    ts = read_targets(path)
-    return [(t.name, t.lat_deg, t.lon_deg) for t in ts.targets]
 
 
 def test_demo_plan_sees_every_target_and_clears_every_leg(tmp_path: Path) -> None:
@@ -39,7 +33,7 @@ def test_demo_plan_sees_every_target_and_clears_every_leg(tmp_path: Path) -> Non
     problems = check_mission(
         DEMO / "site.tif",
         tmp_path / "mission.waypoints",
-        _kml_targets(DEMO / "targets.kml"),
+        kml_targets(DEMO / "targets.kml"),
         fov_deg=30.0,
         min_clearance_m=10.0,
     )
@@ -75,42 +69,6 @@ def test_demo_plan_sees_every_target_and_clears_every_leg(tmp_path: Path) -> Non
     assert summary["lower_bound_m"] <= summary["tour_length_m"]
 
 
-def _valid_targets(
-    dem: Path, count: int, seed: int, box_m: float | None = None, margin_px: int = 12
-) -> list[tuple[str, float, float]]:
-    """Targets on valid ground: pixels whose neighbourhood is all data (test-side choice)."""
-    raster = load_raster(dem)
-    z = raster.z
-    ok = np.isfinite(z)
-    # A pixel qualifies if a (2*margin+1) square around it is all valid.
-    pad = np.pad(ok, margin_px, constant_values=False).astype(np.int32)
-    integral = pad.cumsum(0).cumsum(1)
-    integral = np.pad(integral, ((1, 0), (1, 0)))
-    k = 2 * margin_px + 1
-    window = integral[k:, k:] - integral[:-k, k:] - integral[k:, :-k] + integral[:-k, :-k]
-    good = window == k * k
-    rows, cols = np.nonzero(good)
-    with rasterio.open(dem) as src:
-        transform, crs = src.transform, pyproj.CRS.from_wkt(src.crs.to_wkt())
-    if crs.is_compound:
-        crs = crs.sub_crs_list[0]
-    to_geo = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
-    rng = np.random.default_rng(seed)
-    if box_m is not None:
-        # Keep to a box around a random qualifying pixel (for rasters of many kilometres).
-        c = rng.integers(len(rows))
-        cell_m = box_m / abs(transform.a) if crs.is_projected else box_m / 90.0
-        near = (np.abs(rows - rows[c]) < cell_m) & (np.abs(cols - cols[c]) < cell_m)
-        rows, cols = rows[near], cols[near]
-    pick = rng.choice(len(rows), size=count, replace=False)
-    out = []
-    for n, i in enumerate(pick, start=1):
-        x, y = transform @ (cols[i] + 0.5, rows[i] + 0.5)
-        lon, lat = to_geo.transform(x, y)
-        out.append((f"T{n}", float(lat), float(lon)))
-    return out
-
-
 REAL_CASES = [
     ("odm_dsm_utm51n.tif", 10, None),
     ("codem_aoi_dsm_utm16n_egm2008.tif", 10, None),
@@ -122,7 +80,7 @@ REAL_CASES = [
 def test_300_targets_on_the_demo_plan_and_check(tmp_path: Path) -> None:
     """Beyond the exact solver and the dense arrays of old: every target seen and every leg
     clear, checked independently on the written sorties."""
-    targets = Path(__file__).parent / "data" / "targets" / "demo_300_targets.csv"
+    targets = Path(__file__).resolve().parents[1] / "data" / "targets" / "demo_300_targets.csv"
     result = plan(DEMO / "site.tif", targets, PlanSettings(solve=SolveSettings(time_limit_s=3.0)))
     write_products(result, tmp_path, with_map=False)
     files = sorted(tmp_path.glob("mission*.waypoints"))
@@ -147,7 +105,7 @@ def test_every_stop_sees_its_targets_from_around_its_waypoint(
     write_products(result, tmp_path, with_map=False)
     raster = load_raster(DEMO / "site.tif")
     flown = read_waypoints_file(tmp_path / "mission.waypoints")
-    targets = {name: (lat, lon) for name, lat, lon in _kml_targets(DEMO / "targets.kml")}
+    targets = {name: (lat, lon) for name, lat, lon in kml_targets(DEMO / "targets.kml")}
     stops = json.loads((tmp_path / "summary.json").read_text())["stops"]
     assert len(stops) == len(flown.waypoints)
     geod = pyproj.Geod(ellps="WGS84")
@@ -168,7 +126,7 @@ def test_real_rasters_plan_and_check(
     tmp_path: Path, name: str, count: int, box_m: float | None
 ) -> None:
     dem = REAL_DEMS / name
-    targets = _valid_targets(dem, count, seed=3, box_m=box_m)
+    targets = valid_targets(dem, count, seed=3, box_m=box_m)
     csv = tmp_path / "targets.csv"
     csv.write_text(
         "name,lat,lon\n" + "".join(f"{n},{lat:.9f},{lon:.9f}\n" for n, lat, lon in targets)
