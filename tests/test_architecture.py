@@ -10,7 +10,6 @@ import ast
 from pathlib import Path
 
 import grimp
-import pytest
 
 import urpt_gcs
 
@@ -65,10 +64,6 @@ def _defines_all(path: Path) -> bool:
     return False
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="__all__ is being added area by area (issue 37); turned on once every area has it",
-)
 def test_every_module_declares_its_public_names() -> None:
     missing = [_name(path) for path in _modules() if not _defines_all(path)]
     assert not missing, "modules without __all__:\n" + "\n".join(f"  {m}" for m in missing)

@@ -33,6 +33,21 @@ from rasterio.transform import Affine
 from urpt_gcs.batch.table import rows_csv
 from urpt_gcs.errors import OutputError, SettingsError, UrptError
 
+__all__ = [
+    "BASE_M",
+    "EPSG",
+    "NODATA",
+    "RES_M",
+    "TERRAIN_STAGES",
+    "TILE_PX",
+    "Grid",
+    "ScaleRow",
+    "ScaleSite",
+    "format_table",
+    "make_scale_site",
+    "run_scale",
+]
+
 EPSG = 32632
 WEST_M, NORTH_M = 500_000.0, 5_300_000.0
 RES_M = 0.3

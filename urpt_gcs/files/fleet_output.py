@@ -20,6 +20,14 @@ from urpt_gcs.files.output import Destination, commit
 from urpt_gcs.files.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
 from urpt_gcs.pipeline.fleet import FleetPlan
 
+__all__ = [
+    "check_fleet_out",
+    "fleet_summary",
+    "fleet_summary_text",
+    "vehicle_dir",
+    "write_fleet_products",
+]
+
 
 def vehicle_dir(number: int) -> str:
     return f"vehicle_{number}"

@@ -23,6 +23,8 @@ from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.cover import cover_sets
 from urpt_gcs.visibility.regions import Camera, line_of_sight
 
+__all__ = ["RING_POINTS", "robust_tour"]
+
 # Points on the ring around each stop, besides the stop itself.
 RING_POINTS = 8
 # How far a failing stop moves towards its targets on each try, as a share of the way.

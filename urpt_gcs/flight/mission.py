@@ -17,6 +17,35 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.errors import SettingsError
 
+__all__ = [
+    "AUTOPILOT_OF",
+    "DEFAULT_SPEED_M_S",
+    "FIRMWARES",
+    "FLOAT32_MAX",
+    "GLOBAL_FRAMES",
+    "LOCATION_ALT_MAX_M",
+    "LOWEST_AMSL_M",
+    "MAX_MISSION_ITEMS",
+    "RELATIVE_ALT_FRAMES",
+    "TERRAIN_ALT_FRAMES",
+    "UINT16_SECONDS_MAX",
+    "Firmware",
+    "GeoPoint",
+    "Mission",
+    "MissionItem",
+    "MissionSettings",
+    "below_home",
+    "build_mission",
+    "command_name",
+    "commanded_speed",
+    "count_problem",
+    "item_problem",
+    "photo_headings",
+    "round_e7",
+    "upload_problem",
+    "waypoint_positions",
+]
+
 Firmware = Literal["ardupilot", "px4"]
 FIRMWARES: tuple[Firmware, ...] = ("ardupilot", "px4")
 

@@ -39,6 +39,28 @@ from urpt_gcs.flight.mission import (
 from urpt_gcs.site.camera import Frame
 from urpt_gcs.site.targets import Target
 
+__all__ = [
+    "ALTITUDE_MODE_OF_FRAME",
+    "CHECK_KEY",
+    "CHECK_VERSION",
+    "FIRMWARE_OF",
+    "GEOFENCE_VERSION",
+    "GROUND_STATION",
+    "MISSION_VERSION",
+    "PLAN_FILE_VERSION",
+    "POLYGON_VERSION",
+    "RALLY_VERSION",
+    "RELATIVE_FRAMES",
+    "ReplayCheck",
+    "assemble_mission",
+    "check_item",
+    "make_item",
+    "plan_json",
+    "read_plan",
+    "read_replay_check",
+    "show",
+]
+
 PLAN_FILE_VERSION = 1
 MISSION_VERSION = 2
 GEOFENCE_VERSION = 2

@@ -30,6 +30,16 @@ from urpt_gcs.flight.mission import (
     count_problem,
 )
 
+__all__ = [
+    "FIELD_COUNT",
+    "FIELD_NAMES",
+    "HEADER",
+    "MIN_DECIMALS",
+    "NAN_TEXT",
+    "read_waypoints",
+    "waypoints_text",
+]
+
 HEADER = "QGC WPL 110"
 FIELD_COUNT = 12
 FIELD_NAMES = (
