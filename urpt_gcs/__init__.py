@@ -3,7 +3,8 @@
 The public API, everything the command line does, as calls:
 
 - :func:`plan` (DEM and targets -> :class:`Plan`) and :func:`plan_fleet` (-> :class:`FleetPlan`),
-  with :class:`PlanSettings`, :class:`FleetSettings` and :class:`VehicleSpec`;
+  with :class:`PlanSettings` (holding :class:`SolveSettings` and :class:`MissionSettings`),
+  :class:`FleetSettings` and :class:`VehicleSpec`;
 - :func:`write_outputs`: a plan's files (``.plan``, ``.waypoints``, KML, GeoJSON, summary, map)
   written into a folder as one set;
 - :func:`upload`: one :class:`Mission` to a vehicle through MAVSDK, read back and compared
@@ -47,12 +48,12 @@ __version__ = "0.1.0"
 
 if TYPE_CHECKING:
     from urpt_gcs.files.write import write_outputs
-    from urpt_gcs.flight.mission import Mission
+    from urpt_gcs.flight.mission import Mission, MissionSettings
     from urpt_gcs.pipeline.fleet import FleetPlan, plan_fleet
     from urpt_gcs.pipeline.planner import plan
     from urpt_gcs.pipeline.result import Plan
     from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, VehicleSpec
-    from urpt_gcs.solvers import Tour
+    from urpt_gcs.solvers import SolveSettings, Tour
     from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload
 
 # Each name loaded on first use, and the module it comes from.
@@ -67,6 +68,8 @@ _LAZY = {
     "FleetSettings": "urpt_gcs.pipeline.settings",
     "VehicleSpec": "urpt_gcs.pipeline.settings",
     "Mission": "urpt_gcs.flight.mission",
+    "MissionSettings": "urpt_gcs.flight.mission",
+    "SolveSettings": "urpt_gcs.solvers",
     "Tour": "urpt_gcs.solvers",
     "UploadSettings": "urpt_gcs.vehicle.link",
     "UploadReport": "urpt_gcs.vehicle.link",
@@ -81,11 +84,13 @@ __all__ = [
     "LinkError",
     "Mission",
     "MissionFileError",
+    "MissionSettings",
     "OutputError",
     "Plan",
     "PlanError",
     "PlanSettings",
     "SettingsError",
+    "SolveSettings",
     "TargetsError",
     "Tour",
     "UploadReport",
