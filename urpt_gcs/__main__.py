@@ -75,6 +75,7 @@ def run() -> None:
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_interrupt)
     try:
+        # The command line loads after the Ctrl-C handler is in place.
         from urpt_gcs.cli import main
 
         main()

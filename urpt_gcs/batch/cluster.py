@@ -101,6 +101,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         )
     if workers is not None and workers < 1:
         raise SettingsError(f"--workers {workers} is below 1: give a number of processes")
+    # Dask loads only when a cluster is used (a lazy load, not a hidden cycle).
     from distributed import Client, LocalCluster
 
     with contextlib.ExitStack() as stack:
@@ -163,6 +164,7 @@ def probe_workers(client: Client, paths: Sequence[str]) -> dict[str, list[str]]:
     ClusterError
         A worker cannot run urpt_gcs (not installed there, or another version).
     """
+    # Runs on a worker: the version that worker has installed.
     from urpt_gcs import __version__
 
     try:
@@ -184,12 +186,14 @@ def probe_workers(client: Client, paths: Sequence[str]) -> dict[str, list[str]]:
 
 
 def _unreadable(paths: list[str]) -> tuple[str, list[str]]:
+    # Runs on a worker: the version that worker has installed.
     from urpt_gcs import __version__
 
     return __version__, [p for p in paths if not (os.path.isfile(p) and os.access(p, os.R_OK))]
 
 
 def _worker_name() -> str:
+    # Dask loads only when a cluster is used.
     from distributed import get_worker
 
     try:
@@ -255,6 +259,7 @@ def run_jobs(
             finish(Done(index, value, error, worker, wall_s))
         return [end for end in ends if end is not None]
 
+    # Dask loads only when a cluster is used.
     from distributed import as_completed
 
     futures = client.map(_Timed(fn), list(jobs), pure=False)

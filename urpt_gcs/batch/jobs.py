@@ -382,6 +382,7 @@ def run_job(job: Job) -> JobOutput:
     UrptError
         The job's plan failed; the message is its one line.
     """
+    # Runs on a worker process: the planner loads there, on its first job.
     from urpt_gcs.files.products import render_products
     from urpt_gcs.pipeline.planner import plan
 
@@ -430,6 +431,7 @@ def output_folders(jobs: Sequence[Job], out_dir: Path) -> None:
     OutputError
         Naming the folder and the fix.
     """
+    # The products module loads the planner; the jobs file is read and checked without it.
     from urpt_gcs.files.products import check_out
 
     check_folder(out_dir, "--out", names=[RESULTS_FILE])
@@ -475,6 +477,7 @@ def run_batch(
     ClusterError, OutputError
         Before any job runs: an input a worker cannot read, an output that cannot be written.
     """
+    # The products module loads the planner; the jobs file is read and checked without it.
     from urpt_gcs.files.products import check_out
 
     output_folders(jobs, out_dir)

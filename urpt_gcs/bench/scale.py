@@ -257,6 +257,7 @@ def _peak_rss_mb() -> float:
 
 
 def _plan_child(dem: str, targets: str, options: dict[str, Any], out: Any) -> None:
+    # A fresh process per plan, so its peak memory is the plan's own: the planner loads here.
     from urpt_gcs.pipeline.planner import plan
     from urpt_gcs.pipeline.settings import PlanSettings
 

@@ -195,6 +195,7 @@ def write_fleet_products(
     data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed)
     top_files: dict[str, str | bytes] = {**own, SUMMARY_FILE: json.dumps(data, indent=2) + "\n"}
     if with_map:
+        # matplotlib loads only when a map is drawn.
         from urpt_gcs.files.mapview import render_fleet_map
 
         f = data["fleet"]

@@ -113,6 +113,7 @@ def render_products(
     data = summary(plan, files=[str(out_dir / n) for n in names])
     files[SUMMARY_FILE] = json.dumps(data, indent=2) + "\n"
     if with_map:
+        # matplotlib loads only when a map is drawn.
         from urpt_gcs.files.mapview import render_map
 
         files[MAP_FILE] = render_map(plan, data)
