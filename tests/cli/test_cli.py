@@ -363,13 +363,13 @@ def test_the_display_ticks_while_ortools_holds_the_interpreter() -> None:
 
 
 def test_the_display_ticks_while_the_exact_dp_runs() -> None:
-    from test_exact import _random_instance
+    from support.instances import random_instance
 
     from urpt_gcs.progress import StageProgress
     from urpt_gcs.solvers.exact import search_exact, warm_up
 
     warm_up()
-    instance = _random_instance(1, n=200, m=16, depot=True, overlap=0.0)
+    instance = random_instance(1, n=200, m=16, depot=True, overlap=0.0)
     stream = _TimedStream()
     with StageProgress(stream, time_limit_s=3.0, live=True) as progress:
         progress("solving (200 viewpoints)")

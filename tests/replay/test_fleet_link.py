@@ -287,7 +287,7 @@ def independent_closest(
 
 def _check_targets_independently(report: FleetReport) -> None:
     """Every target, each from the photo the judge names, also for tests/support/independent.py."""
-    from independent import load_raster, sees
+    from support.independent import load_raster, sees
 
     raster = load_raster(SITE)
     targets = {t.name: t for t in read_targets(TARGETS).targets}

@@ -459,7 +459,7 @@ def test_replay_flies_the_estimated_flight_time(name: str) -> None:
 def test_replay_verdict_agrees_with_the_independent_checker() -> None:
     """Each photo the replay names as seeing a target also sees it for tests/support/independent.py
     (its own raster reading, interpolation and geodesy)."""
-    from independent import load_raster, sees
+    from support.independent import load_raster, sees
 
     from urpt_gcs.site.targets import read_targets
 

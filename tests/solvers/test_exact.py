@@ -5,38 +5,19 @@ from __future__ import annotations
 import itertools
 import math
 
-import numpy as np
 import pytest
+from support.instances import random_instance
 
-from urpt_gcs.problem.instance import Covers, Instance, euclidean_matrix
-from urpt_gcs.solvers import SolveSettings, choose, solve
+from urpt_gcs.problem.instance import Instance
+from urpt_gcs.solvers import SolveSettings, choose, prepare, solve
 from urpt_gcs.solvers.exact import ExactSolver, exact_work, greedy_order, search_exact
 
 
-def _random_instance(
-    seed: int, n: int, m: int, depot: bool, asymmetric: bool = False, overlap: float = 0.3
-) -> Instance:
-    rng = np.random.default_rng(seed)
-    pts = rng.uniform(0, 100, (n, 2))
-    covers = np.zeros((n, m), dtype=bool)
-    covers[np.arange(n), rng.integers(0, m, n)] = True
-    covers[np.arange(m) % n, np.arange(m)] = True  # every target seen
-    covers |= rng.random((n, m)) < overlap  # overlapping cover sets
-    dist = euclidean_matrix(pts)
-    if asymmetric:
-        dist = dist + rng.uniform(0, 20, (n, n))
-        np.fill_diagonal(dist, 0.0)
-    depot_distance = None
-    if depot:
-        home = rng.uniform(0, 100, 2)
-        d = np.hypot(pts[:, 0] - home[0], pts[:, 1] - home[1])
-        depot_distance = np.vstack([d, d + (rng.uniform(0, 5, n) if asymmetric else 0)])
-    return Instance(
-        covers=Covers.from_dense(covers),
-        distance=dist,
-        depot_distance=depot_distance,
-        points_xy=pts,
-    )
+@pytest.fixture(scope="module", autouse=True)
+def _compiled() -> None:
+    """Compile the kernels before any time limit runs: on a cold cache the first solve would
+    spend its limit compiling and end unproven."""
+    prepare("exact")
 
 
 def _brute_force(inst: Instance) -> float:
@@ -57,7 +38,7 @@ def _brute_force(inst: Instance) -> float:
 @pytest.mark.parametrize("seed", range(12))
 @pytest.mark.parametrize("depot", [True, False])
 def test_exact_equals_brute_force(seed: int, depot: bool) -> None:
-    inst = _random_instance(seed, n=7, m=4, depot=depot, overlap=0.25)
+    inst = random_instance(seed, n=7, m=4, depot=depot, overlap=0.25)
     tour = solve(inst, "exact")
     assert tour.proven_optimal
     assert inst.uncovered(list(tour.order)) == []
@@ -67,13 +48,13 @@ def test_exact_equals_brute_force(seed: int, depot: bool) -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_exact_equals_brute_force_asymmetric(seed: int) -> None:
-    inst = _random_instance(100 + seed, n=7, m=3, depot=seed % 2 == 0, asymmetric=True, overlap=0.0)
+    inst = random_instance(100 + seed, n=7, m=3, depot=seed % 2 == 0, asymmetric=True, overlap=0.0)
     tour = solve(inst, "exact")
     assert tour.length == pytest.approx(_brute_force(inst), rel=1e-9)
 
 
 def test_auto_picks_exact_when_it_fits() -> None:
-    small = _random_instance(1, n=60, m=8, depot=True)
+    small = random_instance(1, n=60, m=8, depot=True)
     assert exact_work(small).fits_budget
     assert choose(small) == "exact"
     tour = solve(small, "auto", SolveSettings(time_limit_s=1.0))
@@ -83,7 +64,7 @@ def test_auto_picks_exact_when_it_fits() -> None:
 
 @pytest.mark.parametrize("depot", [True, False])
 def test_stopped_early_it_keeps_a_covering_tour_and_a_valid_bound(depot: bool) -> None:
-    inst = _random_instance(3, n=40, m=10, depot=depot, overlap=0.1)
+    inst = random_instance(3, n=40, m=10, depot=depot, overlap=0.1)
     seed = greedy_order(inst)
     whole = search_exact(inst, seed)
     assert whole.proven and whole.work > 1000
@@ -102,7 +83,7 @@ def test_stopped_early_it_keeps_a_covering_tour_and_a_valid_bound(depot: bool) -
 
 
 def test_a_deadline_already_past_still_answers_with_a_tour() -> None:
-    inst = _random_instance(4, n=30, m=8, depot=False)
+    inst = random_instance(4, n=30, m=8, depot=False)
     found = search_exact(inst, deadline=0.0)
     assert not found.proven and found.work == 0
     assert inst.uncovered(list(found.order)) == []
