@@ -160,7 +160,7 @@ SITE = '[[site]]\nname = "a"\ndem = "d.tif"\ntargets = "t.kml"\n'
         ('[[site]]\nname = "a"\ndem = "d.tif"\n', "[[site]] 1 has no 'targets'"),
         (SITE + "fvo = 30\n", "[[site]] 'a': unknown key 'fvo': did you mean 'fov'?"),
         (SITE + 'fov = "wide"\n', "[[site]] 'a', key 'fov': 'wide' is not a number"),
-        (SITE + "fov = 95\n", "[[site]] 'a' (job a): --fov 95"),
+        (SITE + "fov = 95\n", "[[site]] 'a' (job a): fov 95"),
         ("[plan]\nstrict = 1\n" + SITE, "[plan], key 'strict': 1 is not true or false"),
         (SITE + "[site.sweep]\naltitude = 80\n", "key 'altitude': give a list of values"),
         (SITE + '[site.sweep]\ncamera = ["tele"]\n', "no [cameras.tele] table"),
@@ -279,7 +279,7 @@ altitude = 300
     assert [r.job for r in rows] == names
     assert sorted(ended) == sorted(names)
     assert [r.status for r in rows] == ["ok"] * 5 + ["failed"]
-    assert "--altitude 300 m is at or below the terrain" in rows[-1].error
+    assert rows[-1].error.startswith("altitude 300 m is at or below the terrain")
     assert not (out / "low").exists()
     assert {r.worker for r in rows} <= {w for w in client.scheduler_info()["workers"]}
     table = list(csv.DictReader((out / "batch.csv").open()))

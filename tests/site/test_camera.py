@@ -98,11 +98,11 @@ def test_gsd_caps_the_distance_to_the_target() -> None:
 @pytest.mark.parametrize(
     ("flags", "needle"),
     [
-        (("nope", None, None, None), "--camera 'nope' is not known"),
+        (("nope", None, None, None), "^camera 'nope' is not known"),
         (("phantom4rtk", "13x8", None, None), "both describe the camera"),
-        ((None, "13.2x8.8", 8.8, None), "without --image"),
+        ((None, "13.2x8.8", 8.8, None), "without image"),
         ((None, "13.2by8.8", 8.8, "10x10"), "is not WIDTHxHEIGHT"),
-        ((None, "13.2x8.8", 0.0, "10x10"), "--focal 0.0 mm is out of range"),
+        ((None, "13.2x8.8", 0.0, "10x10"), "^focal 0.0 mm is out of range"),
     ],
 )
 def test_bad_camera_flags_name_the_flag(flags: tuple, needle: str) -> None:
@@ -111,7 +111,7 @@ def test_bad_camera_flags_name_the_flag(flags: tuple, needle: str) -> None:
 
 
 def test_gsd_needs_a_frame_and_approx_needs_the_cone() -> None:
-    with pytest.raises(SettingsError, match="--gsd needs the camera's pixels"):
+    with pytest.raises(SettingsError, match=r"^gsd_cm needs the camera's pixels"):
         PlanSettings(gsd_cm=2.0)
     with pytest.raises(SettingsError, match="solver approx"):
         PlanSettings(frame=CAMERAS["mavic3e"].frame, solver="approx")

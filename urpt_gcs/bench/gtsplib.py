@@ -90,8 +90,10 @@ def bench_solvers(solvers: Sequence[str]) -> list[str]:
     chosen = list(solvers) if solvers else ([PREFERRED] if PREFERRED in SOLVERS else [])
     for name in chosen:
         if name not in SOLVERS and name != "auto":
-            raise SettingsError(
-                f"--solver {name!r} is not known: use one of {', '.join(['auto', *SOLVERS])}"
+            raise SettingsError.about(
+                "{solver} {value!r} is not known: use one of {known}",
+                value=name,
+                known=", ".join(["auto", *SOLVERS]),
             )
     return [*dict.fromkeys(name for name in chosen if name != BASELINE), BASELINE]
 

@@ -29,6 +29,7 @@ from urpt_gcs.pipeline.options import FLAGS
 
 __all__ = [
     "INTERRUPTED_EXIT",
+    "SITL_FLAGS",
     "RootGroup",
     "fail",
     "interrupted",
@@ -39,10 +40,25 @@ __all__ = [
 
 INTERRUPTED_EXIT = 130  # 128 + SIGINT
 
+# The simulated vehicle's settings (urpt_gcs.sim.VehicleSettings) as ``urpt-gcs sitl`` takes
+# them; written here, not imported, so that a command does not load the simulator to fail.
+SITL_FLAGS = {
+    "speedup": "--speedup",
+    "loss": "--loss",
+    "latency_ms": "--latency",
+    "drop_after": "--drop-after",
+    "capacity": "--capacity",
+    "boot_s": "--boot",
+    "seed": "--seed",
+}
+# Every setting a command names in an error, by its flag (the plan's seed and the
+# simulator's are both --seed).
+_NAMES = {**SITL_FLAGS, **FLAGS}
+
 
 def fail(exc: UrptError) -> NoReturn:
     """One line on stderr, exit 1; a setting is named by its flag."""
-    text = exc.naming(FLAGS) if isinstance(exc, SettingsError) else str(exc)
+    text = exc.naming(_NAMES) if isinstance(exc, SettingsError) else str(exc)
     message = " ".join(text.split())
     click.echo(f"urpt-gcs: error: {message}", err=True)
     sys.exit(1)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from urpt_gcs.errors import SettingsError, UrptError
+from urpt_gcs.pipeline.options import FLAGS
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.result import AltitudePoint, AltitudeSweep, Plan
 from urpt_gcs.pipeline.settings import PlanSettings
@@ -71,7 +72,10 @@ def _plan_at(job: tuple[Path, Path, PlanSettings, float]) -> AltitudePoint:
         trial = dataclasses.replace(settings, altitude_m=altitude, workers=1, certify=False)
         result = plan(dem, targets, trial)
     except UrptError as exc:
-        return AltitudePoint(altitude, None, None, time.perf_counter() - started, str(exc))
+        # The sweep's record (summary.json, the report) names a setting by its flag, as
+        # ``urpt-gcs plan --altitude auto`` has always written it.
+        why = exc.naming(FLAGS) if isinstance(exc, SettingsError) else str(exc)
+        return AltitudePoint(altitude, None, None, time.perf_counter() - started, why)
     return AltitudePoint(
         altitude, result.flown_length_m, result.flight_time_s, time.perf_counter() - started
     )
@@ -100,9 +104,13 @@ def best_altitude(
         Called with a short message as each stage starts.
     """
     if settings.altitude_m is not None:
-        raise SettingsError("--altitude auto chooses the altitude: give it without a number")
+        raise SettingsError.about(
+            "{altitude_m} auto chooses the altitude: give it without a number"
+        )
     if not 1 <= steps <= 50:
-        raise SettingsError(f"--altitude-steps {steps} is out of range: give 1 to 50")
+        raise SettingsError.about(
+            "{altitude_steps} {value} is out of range: give 1 to 50", value=steps
+        )
     say = progress or (lambda _msg: None)
     started = time.perf_counter()
     say("planning the lowest plane")

@@ -226,14 +226,20 @@ def read_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
     low = np.flatnonzero(ground >= altitude)
     if low.size:
         i = int(low[0])
-        raise SettingsError(
-            f"--altitude {altitude:g} m is at or below the terrain at target '{site.names[i]}' "
-            f"({ground[i]:.1f} m): raise it above {float(ground.max()):.1f} m or use --clearance"
+        raise SettingsError.about(
+            "{altitude_m} {altitude:g} m is at or below the terrain at target '{name}' "
+            "({ground:.1f} m): raise it above {top:.1f} m or use {clearance_m}",
+            altitude=altitude,
+            name=site.names[i],
+            ground=ground[i],
+            top=float(ground.max()),
         )
     if home_ground >= altitude:
-        raise SettingsError(
-            f"--altitude {altitude:g} m is at or below the ground at home ({home_ground:.1f} m): "
-            "raise it or use --clearance"
+        raise SettingsError.about(
+            "{altitude_m} {altitude:g} m is at or below the ground at home ({ground:.1f} m): "
+            "raise it or use {clearance_m}",
+            altitude=altitude,
+            ground=home_ground,
         )
     camera = settings.camera_at(altitude)
     check_gsd(camera, ground, site.names)

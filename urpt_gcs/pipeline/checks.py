@@ -67,7 +67,12 @@ def check_swapped(
         "did you swap lat and lon?"
     )
     if i == len(points) - 1 and home_source == "--home":
-        raise SettingsError(f"--home {a},{b} {problem} Give --home LAT,LON: --home {b},{a}")
+        raise SettingsError.about(
+            "{home} {a},{b} {problem} Give {home} LAT,LON: {home} {b},{a}",
+            a=a,
+            b=b,
+            problem=problem,
+        )
     fix = SWAP_FIX.get(Path(site.source).suffix.lower(), "swap the two numbers")
     raise TargetsError(
         f"{where} ({a:.7f}, {b:.7f}) in targets file '{site.source}' {problem} "
@@ -204,10 +209,14 @@ def check_gsd(camera: Camera, ground_m: FloatArray, names: list[str]) -> None:
     if height[i] < far:
         return
     assert camera.gsd_cm is not None
-    raise SettingsError(
-        f"--gsd {camera.gsd_cm:g} cm needs the camera within {far:.1f} m of target "
-        f"'{names[i]}', but the plane is {height[i]:.1f} m above it: lower --altitude or "
-        "--clearance, or ask for a coarser --gsd"
+    raise SettingsError.about(
+        "{gsd_cm} {gsd:g} cm needs the camera within {far:.1f} m of target '{name}', but the "
+        "plane is {height:.1f} m above it: lower {altitude_m} or {clearance_m}, or ask for a "
+        "coarser {gsd_cm}",
+        gsd=camera.gsd_cm,
+        far=far,
+        name=names[i],
+        height=height[i],
     )
 
 
@@ -240,23 +249,31 @@ def check_cone_width(
     if cone[i] >= least:
         return
     if camera.frame is not None:
-        raise SettingsError(
-            f"the frame camera sees only {cone[i] * 100:.2g} cm around target '{names[i]}' "
-            f"(its short side, within any --gsd distance), under the {least:g} m a stop needs "
-            "(twice --position-tolerance): raise --altitude or --clearance, ask for a coarser "
-            "--gsd, or lower --position-tolerance"
+        raise SettingsError.about(
+            "the frame camera sees only {seen:.2g} cm around target '{name}' (its short side, "
+            "within any {gsd_cm} distance), under the {least:g} m a stop needs (twice "
+            "{position_tolerance_m}): raise {altitude_m} or {clearance_m}, ask for a coarser "
+            "{gsd_cm}, or lower {position_tolerance_m}",
+            seen=cone[i] * 100,
+            name=names[i],
+            least=least,
         )
     height = camera.altitude_m - float(ground_m[i])
     need = math.ceil(math.degrees(math.atan(least / height)) * 1000) / 1000
-    seen = f"--fov {camera.fov_deg:g} sees only {cone[i] * 100:.2g} cm around target '{names[i]}'"
+    seen = "{fov_deg} {fov:g} sees only {seen:.2g} cm around target '{name}'"
+    at = {"fov": camera.fov_deg, "seen": cone[i] * 100, "name": names[i], "need": need}
     if least > MIN_CONE_RADIUS_M:
-        raise SettingsError(
-            f"{seen}, under twice the {tolerance_m:g} m the vehicle may stop off its waypoint "
-            f"(--position-tolerance): use --fov {need:g} or more, or lower --position-tolerance"
+        raise SettingsError.about(
+            seen + ", under twice the {tolerance:g} m the vehicle may stop off its waypoint "
+            "({position_tolerance_m}): use {fov_deg} {need:g} or more, or lower "
+            "{position_tolerance_m}",
+            tolerance=tolerance_m,
+            **at,
         )
-    raise SettingsError(
-        f"{seen}, finer than a waypoint can be placed (1e-7 degree, about 1 cm): "
-        f"use --fov {need:g} or more"
+    raise SettingsError.about(
+        seen + ", finer than a waypoint can be placed (1e-7 degree, about 1 cm): "
+        "use {fov_deg} {need:g} or more",
+        **at,
     )
 
 

@@ -185,9 +185,11 @@ def fleet_problem(
     site = read_site(dem_path, targets_path, settings)
     stages.lap("targets")
     if len(fleet.vehicles) > len(site.names):
-        raise SettingsError(
-            f"{len(fleet.vehicles)} vehicles for {len(site.names)} targets leaves a vehicle "
-            "nothing to photograph: use fewer vehicles (--vehicles or --fleet)"
+        raise SettingsError.about(
+            "{count} vehicles for {targets} targets leaves a vehicle nothing to photograph: "
+            "use fewer vehicles ({vehicles} or {fleet_file})",
+            count=len(fleet.vehicles),
+            targets=len(site.names),
         )
     layers = _layers(site, settings, fleet, stages)
     top = max(range(len(layers)), key=lambda k: layers[k].area.camera.altitude_m)
@@ -247,9 +249,10 @@ def plan_fleet(
     stages.say(f"solving the single-vehicle tour ({reference.n_viewpoints} viewpoints)")
     single = solve(reference, solver, SolveSettings(single_s, settings.solve.seed))
     if any(v < 0 for v in single.order):
-        raise SettingsError(
-            f"--solver {solver} places its own stops, which a fleet cannot share out: use "
-            "--solver auto, exact, heuristic or ortools"
+        raise SettingsError.about(
+            "{solver} {value} places its own stops, which a fleet cannot share out: use "
+            "{solver} auto, exact, heuristic or ortools",
+            value=solver,
         )
     stages.lap("single")
     budget = settings.solve.time_limit_s - single_s
@@ -264,9 +267,10 @@ def plan_fleet(
     stages.lap("fleet")
     idle = [k + 1 for k, share in enumerate(tours.targets) if not share]
     if idle:
-        raise SettingsError(
-            f"vehicle {idle[0]} has nothing left to photograph (the others' stops see all its "
-            "targets): use fewer vehicles (--vehicles or --fleet)"
+        raise SettingsError.about(
+            "vehicle {number} has nothing left to photograph (the others' stops see all its "
+            "targets): use fewer vehicles ({vehicles} or {fleet_file})",
+            number=idle[0],
         )
     bound = makespan_bound(vehicles, problem.single_bound_m)
     plans = tuple(_vehicle_plan(k, layer, tours, solver, stages) for k, layer in enumerate(layers))
@@ -407,22 +411,30 @@ def _check_layer(
     above_home = altitude - area.home_ground_m
     if above_home > settings.max_agl_m:
         fix = (
-            "lower --layer-spacing or --altitude/--clearance, use fewer vehicles or "
-            "--separation time, or raise --max-agl"
+            "lower {layer_spacing_m} or {altitude_m}/{clearance_m}, use fewer vehicles or "
+            "{separation} time, or raise {max_agl_m}"
             if fleet.separation == "altitude"
-            else "lower --altitude/--clearance or raise --max-agl"
+            else "lower {altitude_m}/{clearance_m} or raise {max_agl_m}"
         )
-        raise SettingsError(
-            f"layer {number} (vehicle {number}) at {altitude:.1f} m is {above_home:.1f} m above "
-            f"its home, over --max-agl {settings.max_agl_m:g} m: {fix}"
+        raise SettingsError.about(
+            "layer {number} (vehicle {number}) at {altitude:.1f} m is {above:.1f} m above its "
+            "home, over {max_agl_m} {max_agl:g} m: " + fix,
+            number=number,
+            altitude=altitude,
+            above=above_home,
+            max_agl=settings.max_agl_m,
         )
     if settings.altitude_m is None and fleet.vehicles[number - 1].altitude_m is None:
         over = altitude - area.terrain_max_m
         if over < settings.clearance_m - 1e-6:
-            raise SettingsError(
-                f"layer {number} (vehicle {number}) at {altitude:.1f} m is only {over:.1f} m "
-                f"over the highest terrain its cones reach, under --clearance "
-                f"{settings.clearance_m:g} m: give --altitude, or lower --layer-spacing"
+            raise SettingsError.about(
+                "layer {number} (vehicle {number}) at {altitude:.1f} m is only {over:.1f} m "
+                "over the highest terrain its cones reach, under {clearance_m} {clearance:g} m: "
+                "give {altitude_m}, or lower {layer_spacing_m}",
+                number=number,
+                altitude=altitude,
+                over=over,
+                clearance=settings.clearance_m,
             )
 
 

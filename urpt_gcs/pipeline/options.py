@@ -361,11 +361,16 @@ DEFAULTS: dict[str, Any] = {
     if o.setting
 }
 
-# What the command line calls each setting (``fov_deg`` -> ``--fov``), for its errors.
+# What the command line calls each setting (``fov_deg`` -> ``--fov``), for its errors; and
+# the arguments of library functions the command line takes beside the table
+# (``best_altitude``'s steps).
 FLAGS: dict[str, str] = {
-    name: o.flag
-    for o in (*PLAN_OPTIONS, *FLEET_OPTIONS)
-    for name in (o.name, *(a.rpartition(".")[2] for a in o.also))
+    **{
+        name: o.flag
+        for o in (*PLAN_OPTIONS, *FLEET_OPTIONS)
+        for name in (o.name, *(a.rpartition(".")[2] for a in o.also))
+    },
+    "altitude_steps": "--altitude-steps",
 }
 # What a jobs file calls each setting (``fov_deg`` -> ``fov``), for its errors.
 TOML_KEYS: dict[str, str] = {

@@ -371,13 +371,20 @@ def _delays(
                 assert first is not None
                 lat, lon = xy_to_latlon(crs, np.array([first.where_xy]))[0]
                 what = " horizontally" if horizontal else ""
-                raise SettingsError(
-                    f"vehicles {first.vehicles[0]} and {first.vehicles[1]} come within "
-                    f"{_value(first, horizontal):.1f} m{what} of each other at "
-                    f"{first.at_s:.0f} s after take-off near {lat:.6f}, {lon:.6f}, under the "
-                    f"{fleet.min_m:g} m required, and no start delay up to {cap:.0f} s avoids "
-                    "it: give the vehicles homes further apart in --fleet, or use "
-                    "--separation altitude"
+                raise SettingsError.about(
+                    "vehicles {a} and {b} come within {distance:.1f} m{what} of each other at "
+                    "{at:.0f} s after take-off near {lat:.6f}, {lon:.6f}, under the {least:g} m "
+                    "required, and no start delay up to {cap:.0f} s avoids it: give the "
+                    "vehicles homes further apart in {fleet_file}, or use {separation} altitude",
+                    a=first.vehicles[0],
+                    b=first.vehicles[1],
+                    distance=_value(first, horizontal),
+                    what=what,
+                    at=first.at_s,
+                    lat=lat,
+                    lon=lon,
+                    least=fleet.min_m,
+                    cap=cap,
                 )
             clash = apart(k, delay, turn[:n])
         delays[k] = delay

@@ -187,13 +187,17 @@ class VehicleSpec:
 
 @dataclass(frozen=True, slots=True)
 class FleetSettings:
-    """The fleet and how its vehicles are kept apart."""
+    """The fleet and how its vehicles are kept apart.
+
+    ``source`` says where the vehicles came from, for messages (the command line gives its
+    flag and value: ``--fleet fleet.toml``).
+    """
 
     vehicles: tuple[VehicleSpec, ...]
     separation: SeparationMode = DEFAULTS["separation"]
     layer_spacing_m: float = DEFAULTS["layer_spacing_m"]
     min_separation_m: float = DEFAULTS["min_separation_m"]
-    source: str = "--vehicles"
+    source: str = "the fleet"
 
     def __post_init__(self) -> None:
         if not self.vehicles:

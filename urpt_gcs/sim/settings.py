@@ -74,22 +74,38 @@ class VehicleSettings:
     arm_refusals: int = 0
 
     def __post_init__(self) -> None:
+        # The messages name the settings; ``urpt-gcs sitl`` shows its flags
+        # (urpt_gcs.cli._root.SITL_FLAGS, SettingsError.naming).
         if not (math.isfinite(self.speedup) and 0.1 <= self.speedup <= 1000.0):
-            raise SettingsError(f"--speedup {self.speedup} is out of range; use 0.1 to 1000")
+            raise SettingsError.about(
+                "{speedup} {value} is out of range; use 0.1 to 1000", value=self.speedup
+            )
         if not (math.isfinite(self.loss) and 0.0 <= self.loss < 1.0):
-            raise SettingsError(f"--loss {self.loss} is out of range; use 0 to below 1")
+            raise SettingsError.about(
+                "{loss} {value} is out of range; use 0 to below 1", value=self.loss
+            )
         if not (math.isfinite(self.latency_ms) and 0.0 <= self.latency_ms <= 10_000.0):
-            raise SettingsError(f"--latency {self.latency_ms} ms is out of range; use 0 to 10000")
+            raise SettingsError.about(
+                "{latency_ms} {value} ms is out of range; use 0 to 10000", value=self.latency_ms
+            )
         if self.drop_after is not None and self.drop_after < 1:
-            raise SettingsError(f"--drop-after {self.drop_after} must be at least 1 item")
+            raise SettingsError.about(
+                "{drop_after} {value} must be at least 1 item", value=self.drop_after
+            )
         if not (math.isfinite(self.drop_s) and 0.0 < self.drop_s <= 600.0):
             raise SettingsError(f"drop length {self.drop_s} s is out of range; use up to 600 s")
         if not 2 <= self.capacity <= 65_535:
-            raise SettingsError(f"--capacity {self.capacity} is out of range; use 2 to 65535")
+            raise SettingsError.about(
+                "{capacity} {value} is out of range; use 2 to 65535", value=self.capacity
+            )
         if not (math.isfinite(self.boot_s) and 0.0 <= self.boot_s <= 600.0):
-            raise SettingsError(f"--boot {self.boot_s} s is out of range; use 0 to 600 s")
+            raise SettingsError.about(
+                "{boot_s} {value} s is out of range; use 0 to 600 s", value=self.boot_s
+            )
         if not 0 <= self.seed <= 2**32 - 1:
-            raise SettingsError(f"--seed {self.seed} is out of range; use 0 to {2**32 - 1}")
+            raise SettingsError.about(
+                "{seed} {value} is out of range; use 0 to {high}", value=self.seed, high=2**32 - 1
+            )
         if not 0 <= self.arm_refusals <= 10_000:
             raise SettingsError(f"{self.arm_refusals} arm refusals is out of range; use 0 to 10000")
         if not 1 <= self.system_id <= 250:

@@ -43,24 +43,32 @@ class Frame:
     image_h_px: int
 
     def __post_init__(self) -> None:
+        # The messages name the settings (``sensor``, ``focal``, ``image``); the CLI shows
+        # their flags (SettingsError.naming).
         for name, value in (
-            ("--sensor width", self.sensor_w_mm),
-            ("--sensor height", self.sensor_h_mm),
-            ("--focal", self.focal_mm),
+            ("{sensor} width", self.sensor_w_mm),
+            ("{sensor} height", self.sensor_h_mm),
+            ("{focal}", self.focal_mm),
         ):
             if not (math.isfinite(value) and 0.0 < value <= 200.0):
-                raise SettingsError(f"{name} {value} mm is out of range: give 0 to 200 mm")
+                raise SettingsError.about(
+                    name + " {value} mm is out of range: give 0 to 200 mm", value=value
+                )
         for name, pixels in (
-            ("--image width", self.image_w_px),
-            ("--image height", self.image_h_px),
+            ("{image} width", self.image_w_px),
+            ("{image} height", self.image_h_px),
         ):
             if not 1 <= pixels <= 1_000_000:
-                raise SettingsError(f"{name} {pixels} px is out of range: give 1 to 1000000 px")
+                raise SettingsError.about(
+                    name + " {value} px is out of range: give 1 to 1000000 px", value=pixels
+                )
         if self.diagonal_tan >= _MAX_DIAGONAL_TAN:
-            raise SettingsError(
-                f"a {self.sensor_w_mm:g} x {self.sensor_h_mm:g} mm sensor behind a "
-                f"{self.focal_mm:g} mm lens sees more than 170 degrees across its diagonal: "
-                "check --sensor and --focal (millimetres)"
+            raise SettingsError.about(
+                "a {w:g} x {h:g} mm sensor behind a {f:g} mm lens sees more than 170 degrees "
+                "across its diagonal: check {sensor} and {focal} (millimetres)",
+                w=self.sensor_w_mm,
+                h=self.sensor_h_mm,
+                f=self.focal_mm,
             )
 
     @property
@@ -136,19 +144,23 @@ def camera_preset(name: str) -> CameraPreset:
     try:
         return CAMERAS[name.lower()]
     except KeyError:
-        raise SettingsError(
-            f"--camera {name!r} is not known: use one of {', '.join(sorted(CAMERAS))}, or give "
-            "--sensor WxH --focal F --image WxH"
+        raise SettingsError.about(
+            "{camera} {value!r} is not known: use one of {known}, or give {sensor} WxH "
+            "{focal} F {image} WxH",
+            value=name,
+            known=", ".join(sorted(CAMERAS)),
         ) from None
 
 
-def _pair(flag: str, text: str, unit: str) -> tuple[float, float]:
+def _pair(setting: str, text: str, unit: str) -> tuple[float, float]:
     parts = text.lower().replace("×", "x").replace(unit, "").split("x")
     try:
         a, b = (float(p) for p in parts)
     except ValueError:
-        raise SettingsError(
-            f"{flag} {text!r} is not WIDTHxHEIGHT in {unit}: write it like 13.2x8.8"
+        raise SettingsError.about(
+            "{" + setting + "} {value!r} is not WIDTHxHEIGHT in {unit}: write it like 13.2x8.8",
+            value=text,
+            unit=unit,
         ) from None
     return a, b
 
@@ -156,31 +168,35 @@ def _pair(flag: str, text: str, unit: str) -> tuple[float, float]:
 def frame_from_flags(
     camera: str | None, sensor: str | None, focal_mm: float | None, image: str | None
 ) -> Frame | None:
-    """The frame ``--camera NAME`` or ``--sensor WxH --focal F --image WxH`` describe (None:
-    neither was given, the camera is the cone of ``--fov``)."""
+    """The frame the settings ``camera`` (a name) or ``sensor`` (WxH mm), ``focal`` (mm) and
+    ``image`` (WxH px) describe (None: neither was given, the camera is the cone of
+    ``fov_deg``). Its errors name those settings; the CLI shows their flags."""
     custom = [
-        flag
-        for flag, v in (("--sensor", sensor), ("--focal", focal_mm), ("--image", image))
+        "{" + name + "}"
+        for name, v in (("sensor", sensor), ("focal", focal_mm), ("image", image))
         if v is not None
     ]
     if camera is not None:
         if custom:
-            raise SettingsError(
-                f"--camera {camera} and {', '.join(custom)} both describe the camera: give one"
+            raise SettingsError.about(
+                "{camera} {value} and " + ", ".join(custom) + " both describe the camera: give one",
+                value=camera,
             )
         return camera_preset(camera).frame
     if not custom:
         return None
     if sensor is None or focal_mm is None or image is None:
-        missing = [f for f in ("--sensor", "--focal", "--image") if f not in custom]
-        raise SettingsError(
-            f"{', '.join(custom)} without {', '.join(missing)}: a frame camera needs "
-            "--sensor WxH (mm), --focal F (mm) and --image WxH (px)"
+        missing = [f for f in ("{sensor}", "{focal}", "{image}") if f not in custom]
+        raise SettingsError.about(
+            ", ".join(custom) + " without " + ", ".join(missing) + ": a frame camera needs "
+            "{sensor} WxH (mm), {focal} F (mm) and {image} WxH (px)"
         )
-    w_mm, h_mm = _pair("--sensor", sensor, "mm")
-    w_px, h_px = _pair("--image", image, "px")
+    w_mm, h_mm = _pair("sensor", sensor, "mm")
+    w_px, h_px = _pair("image", image, "px")
     if not (float(w_px).is_integer() and float(h_px).is_integer()):
-        raise SettingsError(f"--image {image!r} must be whole pixels, like 5472x3648")
+        raise SettingsError.about(
+            "{image} {value!r} must be whole pixels, like 5472x3648", value=image
+        )
     return Frame(w_mm, h_mm, focal_mm, int(w_px), int(h_px))
 
 

@@ -118,12 +118,12 @@ def paper_path(
     """
     g = instance.geometry
     if g is None:
-        raise SettingsError("--solver approx needs a planning instance (targets on terrain)")
+        raise SettingsError.about("{solver} approx needs a planning instance (targets on terrain)")
     r = (g.altitude_m - g.terrain_max_m) * math.tan(math.radians(g.fov_deg))
     if r <= 0.0:
-        raise SettingsError(
-            "--solver approx needs the flight plane above all terrain of the area: raise "
-            "--altitude or use --clearance"
+        raise SettingsError.about(
+            "{solver} approx needs the flight plane above all terrain of the area: raise "
+            "{altitude_m} or use {clearance_m}"
         )
     chosen = greedy_disjoint(g.targets_xy, r)
     centres = g.targets_xy[chosen]

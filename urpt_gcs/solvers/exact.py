@@ -438,9 +438,10 @@ def search_exact(
     """
     m, n = instance.n_targets, instance.n_viewpoints
     if m > MAX_TARGETS:
-        raise SettingsError(
-            f"the exact solver handles at most {MAX_TARGETS} targets, not {m}: "
-            "use --solver heuristic"
+        raise SettingsError.about(
+            "the exact solver handles at most {most} targets, not {m}: use {solver} heuristic",
+            most=MAX_TARGETS,
+            m=m,
         )
     order = greedy_order(instance) if seed_order is None else list(seed_order)
     length = instance.tour_length(order)
@@ -590,17 +591,21 @@ class ExactSolver:
         started = time.perf_counter()
         m, n = instance.n_targets, instance.n_viewpoints
         if m > MAX_TARGETS:
-            raise SettingsError(
-                f"the exact solver handles at most {MAX_TARGETS} targets, not {m}: "
-                "use --solver heuristic"
+            raise SettingsError.about(
+                "the exact solver handles at most {most} targets, not {m}: use {solver} heuristic",
+                most=MAX_TARGETS,
+                m=m,
             )
         work = exact_work(instance)
         what = f"the exact solver's tables for {m} targets and {n} viewpoints"
         fix = "use --solver heuristic or fewer --samples"
         if work.memory_bytes > MEMORY_BUDGET_BYTES * 4:
-            raise SettingsError(
-                f"{what} would need {work.memory_bytes / 2**30:.1f} GiB, over the exact "
-                f"solver's {MEMORY_BUDGET_BYTES * 4 / 2**30:.1f} GiB: {fix}"
+            raise SettingsError.about(
+                "{what} would need {need:.1f} GiB, over the exact solver's {most:.1f} GiB: "
+                "use {solver} heuristic or fewer {samples}",
+                what=what,
+                need=work.memory_bytes / 2**30,
+                most=MEMORY_BUDGET_BYTES * 4 / 2**30,
             )
         # Beside the DP tables: the distance copy, shortest paths and the bound tables.
         require_memory(work.memory_bytes + 4.0 * 8.0 * float(n) * float(n), what, fix)

@@ -272,9 +272,9 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
     low, high = 0.0, max(whole, default=math.inf)
     found = greedy(high) if whole else None
     if found is None:
-        raise SettingsError(
+        raise SettingsError.about(
             "no split of the targets among the vehicles fits every vehicle's endurance: "
-            "raise the endurance in --fleet or --endurance, or add vehicles"
+            "raise the endurance in {fleet_file} or {endurance_min}, or add vehicles"
         )
     while high - low > max(1e-3, 1e-6 * high):
         mid = 0.5 * (low + high)
@@ -359,9 +359,10 @@ def solve_fleet(
         prepare(name)
         tour = solve(sub, name, SolveSettings(time_limit_s=budget_s, seed=settings.seed))
         if any(v < 0 for v in tour.order):
-            raise SettingsError(
-                f"--solver {solver} places its own stops, which a fleet cannot share out: "
-                "use --solver auto, exact, heuristic or ortools"
+            raise SettingsError.about(
+                "{solver} {value} places its own stops, which a fleet cannot share out: "
+                "use {solver} auto, exact, heuristic or ortools",
+                value=solver,
             )
         return [int(kept[v]) for v in tour.order]
 

@@ -29,8 +29,10 @@ def choose(instance: Instance, name: str = "auto") -> str:
     """The solver ``name`` stands for on ``instance``."""
     if name != "auto":
         if name not in SOLVERS:
-            raise SettingsError(
-                f"--solver {name!r} is not known: use one of {', '.join(SOLVER_CHOICES)}"
+            raise SettingsError.about(
+                "{solver} {value!r} is not known: use one of {known}",
+                value=name,
+                known=", ".join(SOLVER_CHOICES),
             )
         return name
     if exact_work(instance).fits_budget:

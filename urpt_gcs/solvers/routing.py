@@ -129,9 +129,11 @@ class RoutingSolver:
     def solve(self, instance: Instance, settings: SolveSettings) -> Tour:
         n = partition_nodes(instance)
         if n > MAX_NODES:
-            raise SettingsError(
-                f"the OR-Tools baseline handles at most {MAX_NODES} (viewpoint, target) nodes, "
-                f"not {n}: use --solver heuristic, or fewer --samples"
+            raise SettingsError.about(
+                "the OR-Tools baseline handles at most {most} (viewpoint, target) nodes, "
+                "not {n}: use {solver} heuristic, or fewer {samples}",
+                most=MAX_NODES,
+                n=n,
             )
         require_partition_memory(instance, self.name, _BYTES_PER_NODE_PAIR)
         started = time.perf_counter()

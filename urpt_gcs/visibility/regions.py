@@ -70,22 +70,28 @@ class Camera:
     headings: int = 1
 
     def __post_init__(self) -> None:
+        # The messages name the settings; the CLI shows their flags (SettingsError.naming).
         if not (math.isfinite(self.fov_deg) and 0.0 < self.fov_deg < 90.0):
-            raise SettingsError(
-                f"--fov {self.fov_deg} is outside (0, 90): give the camera half-angle in degrees"
+            raise SettingsError.about(
+                "{fov_deg} {value} is outside (0, 90): give the camera half-angle in degrees",
+                value=self.fov_deg,
             )
         if not math.isfinite(self.altitude_m):
-            raise SettingsError(f"--altitude {self.altitude_m} is not a number")
+            raise SettingsError.about("{altitude_m} {value} is not a number", value=self.altitude_m)
         if self.gsd_cm is not None:
             if self.frame is None:
-                raise SettingsError(
-                    "--gsd needs the camera's pixels: give --camera NAME or --sensor, --focal "
-                    "and --image"
+                raise SettingsError.about(
+                    "{gsd_cm} needs the camera's pixels: give {camera} NAME or {sensor}, "
+                    "{focal} and {image}"
                 )
             if not (math.isfinite(self.gsd_cm) and 0.0 < self.gsd_cm <= 1000.0):
-                raise SettingsError(f"--gsd {self.gsd_cm} cm is out of range: give 0 to 1000 cm")
+                raise SettingsError.about(
+                    "{gsd_cm} {value} cm is out of range: give 0 to 1000 cm", value=self.gsd_cm
+                )
         if not 1 <= self.headings <= 180:
-            raise SettingsError(f"--headings {self.headings} is out of range: give 1 to 180")
+            raise SettingsError.about(
+                "{headings} {value} is out of range: give 1 to 180", value=self.headings
+            )
 
     @classmethod
     def framed(
@@ -216,7 +222,9 @@ class Region:
 def azimuths(samples: int) -> FloatArray:
     """``samples`` evenly spaced azimuths in radians, counter-clockwise from east."""
     if samples < 3:
-        raise SettingsError(f"--samples {samples} is below 3: use at least 3 azimuths")
+        raise SettingsError.about(
+            "{samples} {value} is below 3: use at least 3 azimuths", value=samples
+        )
     return np.arange(samples, dtype=np.float64) * (2.0 * math.pi / samples)
 
 
