@@ -62,7 +62,7 @@ def test_solvers_default_to_the_heuristic_and_always_add_the_baseline(
     assert bench_solvers([]) == ["ortools"]
     monkeypatch.setitem(SOLVERS, "heuristic", RoutingSolver)
     assert bench_solvers([]) == ["heuristic", "ortools"]
-    with pytest.raises(SettingsError, match="^solver 'nope' is not known"):
+    with pytest.raises(SettingsError, match=r"^solver 'nope' is not known"):
         bench_solvers(["nope"])
 
 
