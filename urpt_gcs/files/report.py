@@ -54,7 +54,8 @@ def flown_stops(plan: Plan) -> list[FlownStop]:
     """Every stop of every sortie with what it sees and when the copter gets there.
 
     Positions are the missions' NAV_WAYPOINT items, so whatever draws them draws what is
-    flown; ``eta_s`` is from arming, on the plan's :class:`~urpt_gcs.flight.safety.FlightModel`.
+    flown; ``eta_s`` is from arming, on the plan's
+    :class:`~urpt_gcs.problem.flight_time.FlightModel`.
     """
     tour = plan.tour
     assert tour.points_xy is not None

@@ -1,5 +1,5 @@
-"""Preflight safety: terrain clearance of every leg, height above ground, battery endurance
-(split into sorties), and the geofence.
+"""Preflight safety: terrain clearance of every leg, height above ground, and the geofence
+(battery endurance and the split into sorties are :mod:`urpt_gcs.problem.flight_time`'s).
 
 Everything here is checked in code on every plan, before any file is written.
 """
@@ -17,19 +17,15 @@ from urpt_gcs.errors import PlanError
 
 # The flight-time model and the sortie cut are terrain-free (the solvers' fleet search uses
 # them); they are imported back here so that every preflight check is found in one module.
-from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.segments import segment_profile
 
 __all__ = [
-    "FlightModel",
     "Leg",
-    "Sortie",
     "check_height_above_ground",
     "check_legs",
     "geofence_polygon",
     "leg_clearances",
-    "split_sorties",
 ]
 
 

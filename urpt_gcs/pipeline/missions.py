@@ -23,19 +23,17 @@ from urpt_gcs.flight.mission import (
     waypoint_positions,
 )
 from urpt_gcs.flight.safety import (
-    FlightModel,
     Leg,
-    Sortie,
     check_height_above_ground,
     check_legs,
     geofence_polygon,
     leg_clearances,
-    split_sorties,
 )
 from urpt_gcs.flight.sorties import SEARCH_SHARE, SortieOrder, order_sorties
 from urpt_gcs.pipeline.area import PlanArea, SiteInputs, altitude_rel, latlon_to_xy, xy_to_latlon
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages
+from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
 from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.reading import fill_along
 from urpt_gcs.solvers import Tour

@@ -13,10 +13,11 @@ from urpt_gcs.bound.certificate import Certificate
 from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.flight.refinement import Refinement
-from urpt_gcs.flight.safety import FlightModel, Leg, Sortie
+from urpt_gcs.flight.safety import Leg
 from urpt_gcs.flight.sorties import SortieOrder
 from urpt_gcs.pipeline.missions import flight_model
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.problem.flight_time import FlightModel, Sortie
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.site.dem import DemInfo
 from urpt_gcs.site.targets import TargetSet
