@@ -30,6 +30,9 @@ REAL_DEMS = SHARED / "dem"
 GTSPLIB = SHARED / "bench" / "gtsplib"
 CETSP = SHARED / "bench" / "cetsp"
 DEMO = REPO / "missions" / "demo"
+# A plan of the demo the tests fly and read, kept apart from missions/demo/out, which
+# `make demo` rewrites.
+DEMO_OUT = Path(__file__).resolve().parent / "data" / "demo_plan"
 # What `plan` prints on stderr as each stage ends when stderr is no terminal.
 STAGE_LINE = re.compile(r"\.\.\. .+: \d+\.\d\d s")
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import DEMO, SHARED
+from conftest import DEMO_OUT, SHARED
 from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from scipy.ndimage import minimum_filter1d
@@ -174,7 +174,7 @@ def test_fleet_upload_refuses_connections_that_do_not_match(
 
 
 def test_a_fleet_folder_without_a_fleet_is_one_line(tmp_path: Path) -> None:
-    result = _upload(DEMO / "out", "--connect", "udpin://127.0.0.1:1")
+    result = _upload(DEMO_OUT, "--connect", "udpin://127.0.0.1:1")
     assert result.exit_code == 1
     assert "single-vehicle plan" in result.stderr and len(result.stderr.splitlines()) == 1
     result = _upload(tmp_path, "--connect", "udpin://127.0.0.1:1")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from conftest import DEMO, SHARED
+from conftest import DEMO, DEMO_OUT, SHARED
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from support.mavlink_peer import split_frames
@@ -40,7 +40,7 @@ from urpt_gcs.vehicle.link import upload
 
 ARDUPILOT = SHARED / "ardupilot"
 BINARY = ARDUPILOT / "arducopter"
-DEMO_PLAN = DEMO / "out" / "mission.plan"
+DEMO_PLAN = DEMO_OUT / "mission.plan"
 SITE, TARGETS = DEMO / "site.tif", DEMO / "targets.kml"
 # The README saw 10x; 20x keeps the file within its budget and flies as well.
 SPEEDUP = 20.0
@@ -189,7 +189,7 @@ def test_the_demo_flies_the_estimated_flight_time(sitl: RunningSitl) -> None:
     """ArduCopter's own take-off, S-curve legs, RTL at WPNAV_SPEED, loiter and landing take
     what the plan's flight model says (summary.json), within 10 %."""
     flight = _fly_and_judge(DEMO_PLAN, sitl)
-    _check_estimate("demo", flight, _estimate_s(DEMO / "out" / "summary.json", 1))
+    _check_estimate("demo", flight, _estimate_s(DEMO_OUT / "summary.json", 1))
 
 
 @needs_sitl

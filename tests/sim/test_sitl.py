@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
-from conftest import DEMO
+from conftest import DEMO, DEMO_OUT
 from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from support.simulated import DEMO_PLAN, demo_mission, simulated
@@ -449,8 +449,8 @@ def test_replay_of_the_demo_mission_passes() -> None:
 def test_replay_flies_the_estimated_flight_time(name: str) -> None:
     """The vehicle flies the planned speed from either file, without replay setting a
     parameter, and the flight takes what the plan's estimate says, within 10 %."""
-    estimate = json.loads((DEMO / "out" / "summary.json").read_text())["flight_time_s"]
-    flight = fly(read_mission(DEMO / "out" / name), ReplaySettings(speedup=200.0))
+    estimate = json.loads((DEMO_OUT / "summary.json").read_text())["flight_time_s"]
+    flight = fly(read_mission(DEMO_OUT / name), ReplaySettings(speedup=200.0))
     print(f"\n{name}: estimate {estimate:.1f} s, simulated flight {flight.sim_time_s:.1f} s")
     assert len(flight.photos) == 12
     assert abs(flight.sim_time_s - estimate) <= 0.1 * estimate
@@ -594,7 +594,7 @@ def test_a_waypoints_file_is_checked_from_the_summary_beside_it(
     alone = tmp_path / "alone"
     alone.mkdir()
     (alone / "mission_3.waypoints").write_bytes((sorties / "mission_3.waypoints").read_bytes())
-    (alone / "summary.json").write_bytes((DEMO / "out" / "summary.json").read_bytes())
+    (alone / "summary.json").write_bytes((DEMO_OUT / "summary.json").read_bytes())
     result = _replay("--plan", str(alone / "mission_3.waypoints"))
     assert result.exit_code == 1
     assert "does not describe mission_3.waypoints" in result.stderr

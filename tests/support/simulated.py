@@ -8,14 +8,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from conftest import DEMO
+from conftest import DEMO_OUT
 
 from urpt_gcs.files.formats import read_plan
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.replay.fly import free_udp_port
 from urpt_gcs.sim import SitlServer, VehicleSettings
 
-DEMO_PLAN = DEMO / "out" / "mission.plan"
+DEMO_PLAN = DEMO_OUT / "mission.plan"
 
 
 def demo_mission() -> Mission:
