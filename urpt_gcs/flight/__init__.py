@@ -1,4 +1,4 @@
 """From a tour to a flight: position margins, refinement, sorties, safety checks, mission items,
-geofence."""
+geofence, the terrain-following flight band."""
 
 __all__: list[str] = []
