@@ -16,7 +16,6 @@ from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.flight.band import (
     FlightBand,
     band_profile,
-    climb_time_s,
     inside_band,
     negated_terrain,
 )
@@ -274,8 +273,3 @@ def test_flight_band_settings_are_checked(floor: float, ceiling: float, says: st
 def test_flight_band_middle() -> None:
     assert FlightBand(30.0, 120.0).mid_m == 75.0
     assert FlightBand(30.0, 10_000.0).ceiling_m == 10_000.0
-
-
-def test_climb_time_is_the_slower_of_moving_across_and_up_or_down() -> None:
-    t = climb_time_s([100.0, 100.0, 100.0, 0.0], [10.0, 60.0, -60.0, 0.0], 10.0, 3.0, 2.0)
-    np.testing.assert_allclose(t, [10.0, 20.0, 30.0, 0.0])

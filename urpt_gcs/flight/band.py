@@ -28,9 +28,9 @@ __all__ = [
     "BandProfile",
     "FlightBand",
     "band_profile",
-    "climb_time_s",
     "inside_band",
     "negated_terrain",
+    "parse_band",
 ]
 
 # The highest ceiling a band may have, in metres above the surface.
@@ -77,6 +77,10 @@ class FlightBand:
                 limit=MAX_CEILING_M,
             )
 
+    def describe(self) -> str:
+        """``30:120 m``, as messages give it."""
+        return f"{self.floor_m:g}:{self.ceiling_m:g} m"
+
     @property
     def mid_m(self) -> float:
         """The height halfway between the floor and the ceiling."""
@@ -86,6 +90,28 @@ class FlightBand:
     def width_m(self) -> float:
         """The ceiling less the floor."""
         return self.ceiling_m - self.floor_m
+
+
+def parse_band(text: str) -> tuple[float, float]:
+    """``FLOOR:CEILING`` metres (``30:120``) as two numbers; checked by :class:`FlightBand`.
+
+    Raises
+    ------
+    SettingsError
+        Text that is not two numbers joined by a colon.
+    """
+    floor, sep, ceiling = str(text).partition(":")
+    try:
+        if not sep:
+            raise ValueError(text)
+        band = (float(floor), float(ceiling))
+    except ValueError:
+        raise SettingsError.about(
+            "{agl_band_m} {value!r} is not FLOOR:CEILING in metres: give e.g. 30:120",
+            value=str(text),
+        ) from None
+    FlightBand(*band)
+    return band
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,32 +266,3 @@ def inside_band(
         & (p.highest_m <= band.ceiling_m + tolerance_m)
     )
     return inside
-
-
-def climb_time_s(
-    dh_m: npt.ArrayLike,
-    dz_m: npt.ArrayLike,
-    cruise_m_s: npt.ArrayLike,
-    up_m_s: npt.ArrayLike,
-    down_m_s: npt.ArrayLike,
-) -> FloatArray:
-    """The time of straight pieces flown with horizontal speed at most ``cruise_m_s`` and
-    vertical speed at most ``up_m_s`` climbing (``dz_m`` > 0) or ``down_m_s`` descending.
-
-    Parameters
-    ----------
-    dh_m, dz_m
-        Each piece's horizontal length and height gained (negative: lost), in metres.
-    cruise_m_s, up_m_s, down_m_s
-        The speed limits, in metres per second.
-
-    Returns
-    -------
-    FloatArray
-        The larger of the horizontal and the vertical time, elementwise, in seconds.
-    """
-    dz = np.asarray(dz_m, dtype=np.float64)
-    vertical = np.where(dz > 0.0, dz / np.asarray(up_m_s), -dz / np.asarray(down_m_s))
-    horizontal = np.abs(np.asarray(dh_m, dtype=np.float64)) / np.asarray(cruise_m_s)
-    out: FloatArray = np.maximum(horizontal, vertical).astype(np.float64)
-    return out

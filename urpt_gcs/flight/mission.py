@@ -26,6 +26,7 @@ __all__ = [
     "LOCATION_ALT_MAX_M",
     "LOWEST_AMSL_M",
     "MAX_MISSION_ITEMS",
+    "PHOTO_COMMANDS",
     "RELATIVE_ALT_FRAMES",
     "TERRAIN_ALT_FRAMES",
     "UINT16_SECONDS_MAX",
@@ -40,8 +41,11 @@ __all__ = [
     "commanded_speed",
     "count_problem",
     "item_problem",
+    "photo_flags",
     "photo_headings",
+    "photo_positions",
     "round_e7",
+    "stop_heights_rel",
     "upload_problem",
     "waypoint_positions",
 ]
@@ -218,7 +222,8 @@ def commanded_speed(items: Sequence[MissionItem]) -> float | None:
 
 
 def waypoint_positions(mission: Mission) -> list[tuple[float, float]]:
-    """(latitude, longitude) of the mission's NAV_WAYPOINT items, in flight order."""
+    """(latitude, longitude) of the mission's NAV_WAYPOINT items, in flight order: its stops
+    and the waypoints without a photo that follow the terrain between them."""
     return [
         (item.params[4], item.params[5])
         for item in mission.items
@@ -226,9 +231,44 @@ def waypoint_positions(mission: Mission) -> list[tuple[float, float]]:
     ]
 
 
+# The items that take a photo at the waypoint before them.
+PHOTO_COMMANDS = frozenset(
+    {mavlink.MAV_CMD_DO_DIGICAM_CONTROL, mavlink.MAV_CMD_IMAGE_START_CAPTURE}
+)
+
+
+def photo_flags(mission: Mission) -> list[bool]:
+    """Per NAV_WAYPOINT, in flight order, whether a photo is taken there (a photo item follows
+    it before the next navigation item)."""
+    flags: list[bool] = []
+    for item in mission.items:
+        if item.command == mavlink.MAV_CMD_NAV_WAYPOINT:
+            flags.append(False)
+        elif item.command in PHOTO_COMMANDS and flags:
+            flags[-1] = True
+    return flags
+
+
+def stop_heights_rel(mission: Mission) -> list[float]:
+    """Each photo waypoint's height above home, in flight order."""
+    heights = [
+        item.params[6] for item in mission.items if item.command == mavlink.MAV_CMD_NAV_WAYPOINT
+    ]
+    return [h for h, photo in zip(heights, photo_flags(mission), strict=True) if photo]
+
+
+def photo_positions(mission: Mission) -> list[tuple[float, float]]:
+    """(latitude, longitude) of the waypoints where a photo is taken, in flight order."""
+    return [
+        p
+        for p, photo in zip(waypoint_positions(mission), photo_flags(mission), strict=True)
+        if photo
+    ]
+
+
 def photo_headings(mission: Mission) -> list[float] | None:
-    """The heading (true north, degrees) the mission turns the vehicle to for each
-    NAV_WAYPOINT, in flight order: the CONDITION_YAW before it (ArduPilot) or its own yaw
+    """The heading (true north, degrees) the mission turns the vehicle to for each photo
+    waypoint, in flight order: the CONDITION_YAW before it (ArduPilot) or its own yaw
     (PX4). None when the mission turns it for none of them (a cone camera's mission)."""
     headings: list[float] = []
     pending = math.nan
@@ -239,6 +279,7 @@ def photo_headings(mission: Mission) -> list[float] | None:
             yaw = item.params[3] if mission.firmware == "px4" else math.nan
             headings.append(yaw % 360.0 if math.isfinite(yaw) else pending)
             pending = math.nan
+    headings = [h for h, photo in zip(headings, photo_flags(mission), strict=True) if photo]
     if all(math.isnan(h) for h in headings):
         return None
     return headings
@@ -255,6 +296,8 @@ def build_mission(
     altitude_rel_m: float,
     settings: MissionSettings,
     headings_deg: Sequence[float] | None = None,
+    heights_rel_m: Sequence[float] | None = None,
+    photos: Sequence[bool] | None = None,
 ) -> Mission:
     """Build the mission for a tour.
 
@@ -279,15 +322,28 @@ def build_mission(
         Firmware, hold time and speeds.
     headings_deg
         The vehicle's heading for each photo; None leaves the yaw to the firmware.
+    heights_rel_m
+        Each waypoint's own height above home (a flight that follows the terrain); None:
+        every waypoint at ``altitude_rel_m``, which is then also the take-off's height.
+    photos
+        Which waypoints take a photo (and hold); None: all of them. A waypoint without one
+        only shapes the path (it follows the terrain between two stops).
     """
     if not waypoints:
         raise SettingsError("a mission needs at least one waypoint")
-    if headings_deg is not None and len(headings_deg) != len(waypoints):
+    photo_count = len(waypoints) if photos is None else sum(bool(p) for p in photos)
+    if headings_deg is not None and len(headings_deg) != photo_count:
         raise SettingsError(
-            f"{len(headings_deg)} headings for {len(waypoints)} waypoints: give one per waypoint"
+            f"{len(headings_deg)} headings for {photo_count} photos: give one per photo"
         )
     if not (math.isfinite(altitude_rel_m) and altitude_rel_m > 0.0):
         raise SettingsError(f"flight altitude {altitude_rel_m} m above home must be positive")
+    heights = [altitude_rel_m] * len(waypoints) if heights_rel_m is None else list(heights_rel_m)
+    shoots = [True] * len(waypoints) if photos is None else list(photos)
+    if len(heights) != len(waypoints) or len(shoots) != len(waypoints):
+        raise SettingsError("give one height and one photo flag per waypoint")
+    if not all(math.isfinite(h) for h in heights):
+        raise SettingsError("every waypoint's height above home must be a number")
     home = GeoPoint(round_e7(home.lat_deg), round_e7(home.lon_deg), home.amsl_m)
     rel = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
     cmd_frame = mavlink.MAV_FRAME_MISSION
@@ -336,15 +392,34 @@ def build_mission(
                 0,
             )
         )
+    photo = 0
     for k, (lat, lon) in enumerate(waypoints):
+        if not shoots[k]:
+            # Only shapes the path: no hold, no turn, no photo.
+            yaw = 0.0 if settings.firmware == "ardupilot" else math.nan
+            items.append(
+                _item(
+                    mavlink.MAV_CMD_NAV_WAYPOINT,
+                    rel,
+                    0,
+                    0,
+                    0,
+                    yaw,
+                    round_e7(lat),
+                    round_e7(lon),
+                    heights[k],
+                )
+            )
+            continue
         yaw = 0.0 if settings.firmware == "ardupilot" else math.nan
         if headings_deg is not None:
-            heading = float(headings_deg[k]) % 360.0
+            heading = float(headings_deg[photo]) % 360.0
             if settings.firmware == "ardupilot":
                 # Absolute heading (param4 0), the default turn rate (0), the shorter way (0).
                 items.append(_item(mavlink.MAV_CMD_CONDITION_YAW, cmd_frame, heading, 0, 0, 0))
             else:
                 yaw = heading
+        photo += 1
         items.append(
             _item(
                 mavlink.MAV_CMD_NAV_WAYPOINT,
@@ -355,7 +430,7 @@ def build_mission(
                 yaw,
                 round_e7(lat),
                 round_e7(lon),
-                altitude_rel_m,
+                heights[k],
             )
         )
         if settings.firmware == "ardupilot":

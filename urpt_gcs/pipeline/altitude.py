@@ -103,6 +103,10 @@ def best_altitude(
     progress
         Called with a short message as each stage starts.
     """
+    if settings.agl_band_m is not None:
+        raise SettingsError.about(
+            "{altitude_m} auto sweeps flight planes; {agl_band_m} follows the terrain: give one"
+        )
     if settings.altitude_m is not None:
         raise SettingsError.about(
             "{altitude_m} auto chooses the altitude: give it without a number"

@@ -7,6 +7,7 @@ fixes the flight plane over it (:class:`PlanArea`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -247,6 +248,32 @@ def read_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
     return PlanArea(terrain, ground, home_ground, top, camera)
 
 
+def read_band_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
+    """Read the DEM for a flight inside the height band (``--agl``): where the cones of a
+    plane at the band's ceiling over the highest terrain reach, which holds every point the
+    band allows that can see a target.
+
+    Parameters
+    ----------
+    site
+        The site, from :func:`read_site`.
+    settings
+        The plan's settings; ``agl_band_m`` gives the band.
+
+    Returns
+    -------
+    PlanArea
+        The DEM window and the ground under the points; its camera's altitude is that plane's
+        (the band's cameras take their height from each viewpoint).
+    """
+    assert settings.agl_band_m is not None
+    ceiling = settings.agl_band_m[1]
+    # The GSD caps what one photo sees from each viewpoint's own height, not the plane's.
+    wide = dataclasses.replace(settings, altitude_m=None, clearance_m=ceiling, gsd_cm=None)
+    area = read_area(site, wide)
+    return dataclasses.replace(area, camera=settings.camera_at(area.camera.altitude_m))
+
+
 def altitude_rel(area: PlanArea) -> float:
     """The plane's height above home as written: centimetres, rounded up, since a higher eye
     only widens the cone and lifts every line of sight, so nothing checked is lost.
@@ -357,6 +384,7 @@ __all__ = [
     "altitude_rel",
     "latlon_to_xy",
     "read_area",
+    "read_band_area",
     "read_site",
     "xy_to_latlon",
 ]

@@ -238,6 +238,12 @@ def plan_fleet(
         A solver that places its own stops, a vehicle left nothing to photograph, or
         vehicles that no start delay keeps apart.
     """
+    if settings.agl_band_m is not None:
+        raise SettingsError.about(
+            "{agl_band_m} (a flight that follows the terrain) is planned for one vehicle only: "
+            "drop {vehicles}/{fleet_file}, or split the targets and plan each vehicle's part "
+            "on its own"
+        )
     stages = Stages(progress)
     problem = fleet_problem(dem_path, targets_path, settings, fleet, stages)
     layers, vehicles, reference = problem.layers, list(problem.vehicles), problem.reference

@@ -179,6 +179,16 @@ PLAN_OPTIONS: tuple[Option, ...] = (
         auto=True,
     ),
     Option(
+        "agl",
+        "agl_band_m",
+        "text",
+        None,
+        "Follow the terrain: fly anywhere from FLOOR to CEILING metres above the surface "
+        "below the vehicle, e.g. 30:120 (instead of one flight plane); each photo from its "
+        "own height.",
+        unit="m",
+    ),
+    Option(
         "clearance",
         "clearance_m",
         "number",

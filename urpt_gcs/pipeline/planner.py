@@ -20,15 +20,16 @@ from pathlib import Path
 
 from urpt_gcs.bound.certificate import bound_time_s
 from urpt_gcs.flight.margin import robust_tour
-from urpt_gcs.pipeline.area import PlanArea, SiteInputs, read_area, read_site
+from urpt_gcs.pipeline.area import PlanArea, SiteInputs, read_area, read_band_area, read_site
+from urpt_gcs.pipeline.band import plan_in_band
 from urpt_gcs.pipeline.improve import bounds_tour, certify_flight, refine_stops
 from urpt_gcs.pipeline.missions import sorties_and_missions
 from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.pipeline.settings import PlanSettings
-from urpt_gcs.pipeline.stages import Stages
+from urpt_gcs.pipeline.stages import Stages, solve_stage
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
-from urpt_gcs.solvers import Tour, choose, prepare, solve
+from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 
@@ -63,10 +64,14 @@ def plan(
     site = read_site(dem_path, targets_path, settings)
     stages.lap("targets")
     stages.say("reading terrain")
+    if settings.agl_band_m is not None:
+        area = read_band_area(site, settings)
+        stages.lap("terrain")
+        return plan_in_band(site, area, settings, stages)
     area = read_area(site, settings)
     stages.lap("terrain")
     regions, instance = _viewpoints(site, area, settings, stages)
-    tour = _solve(instance, settings, stages)
+    tour = solve_stage(instance, settings, stages)
     return finish_plan(site, area, regions, instance, tour, settings, stages)
 
 
@@ -204,18 +209,6 @@ def _viewpoints(
     )
     stages.lap("viewpoints")
     return regions, instance
-
-
-def _solve(instance: Instance, settings: PlanSettings, stages: Stages) -> Tour:
-    """The solver's tour over the viewpoints."""
-    solver = choose(instance, settings.solver)
-    stages.say(f"preparing the {solver} solver (compiled on first use)")
-    prepare(solver)
-    stages.lap("compile")
-    stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
-    tour = solve(instance, solver, settings.solve)
-    stages.lap("solve")
-    return tour
 
 
 __all__ = ["finish_plan", "plan"]

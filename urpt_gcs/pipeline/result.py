@@ -8,9 +8,10 @@ from dataclasses import dataclass
 
 import pyproj
 
-from urpt_gcs.arrays import FloatArray
+from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.bound.certificate import Certificate
 from urpt_gcs.bound.geometric import geometric_lower_bound
+from urpt_gcs.flight.band import FlightBand
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.flight.refinement import Refinement
 from urpt_gcs.flight.safety import Leg
@@ -44,6 +45,49 @@ class AltitudeSweep:
     points: tuple[AltitudePoint, ...]
     best_altitude_m: float
     wall_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class BandFlight:
+    """A flight that follows the terrain inside a height band (``--agl``).
+
+    Attributes
+    ----------
+    band
+        The heights above the surface the vehicle stays within.
+    stops_xyz
+        Every stop in flight order: x, y in the planning CRS, height in the DEM's datum.
+    paths_xyz
+        Per sortie, every point flown through in order: over home at the take-off height,
+        the stops and the waypoints without a photo that follow the terrain, back over home.
+    path_stop
+        Per sortie, for each point of its path the stop it is (index into ``stops_xyz``),
+        -1 for a waypoint that follows the terrain, -2 over home.
+    lowest_m, highest_m
+        The lowest and highest height above the surface anywhere along the written paths.
+    time_bound_s
+        A lower bound of the flight time of any flight inside the band that photographs
+        every target (take-off and landing included).
+    horizontal_bound_m
+        A lower bound of the horizontal length of any such flight.
+    estimate_s
+        The flight time the solver's straight-leg estimate gave the flown order.
+    """
+
+    band: FlightBand
+    stops_xyz: FloatArray
+    paths_xyz: tuple[FloatArray, ...]
+    path_stop: tuple[IntArray, ...]
+    lowest_m: float
+    highest_m: float
+    time_bound_s: float
+    horizontal_bound_m: float
+    estimate_s: float
+
+    @property
+    def inserted(self) -> int:
+        """How many waypoints without a photo follow the terrain."""
+        return sum(int((p == -1).sum()) for p in self.path_stop)
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +130,8 @@ class Plan:
     # The solver's claim for its tour (before any stop moved): no tour over the candidate
     # viewpoints is shorter.
     optimal_over_candidates: bool = False
+    # With --agl: the flight inside the height band, following the terrain.
+    band_flight: BandFlight | None = None
 
     @property
     def lower_bound_m(self) -> float:
@@ -136,4 +182,4 @@ class Plan:
         return self.mission.altitude_rel_m
 
 
-__all__ = ["AltitudePoint", "AltitudeSweep", "Plan"]
+__all__ = ["AltitudePoint", "AltitudeSweep", "BandFlight", "Plan"]

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from urpt_gcs.errors import SettingsError
+from urpt_gcs.flight.band import FlightBand, parse_band
 from urpt_gcs.flight.mission import MissionSettings
 from urpt_gcs.pipeline.options import DEFAULTS, PLAN_OPTIONS, VEHICLE_KEYS
 from urpt_gcs.site.camera import Frame, frame_from_flags
@@ -46,6 +47,9 @@ class PlanSettings:
     fov_deg: float = DEFAULTS["fov_deg"]
     samples: int = DEFAULTS["samples"]
     altitude_m: float | None = DEFAULTS["altitude_m"]
+    # Fly inside this band of heights above the surface (floor, ceiling), metres, following
+    # the terrain; None: one flight plane.
+    agl_band_m: tuple[float, float] | None = DEFAULTS["agl_band_m"]
     clearance_m: float = DEFAULTS["clearance_m"]
     min_clearance_m: float = DEFAULTS["min_clearance_m"]
     home: tuple[float, float] | None = DEFAULTS["home"]
@@ -159,6 +163,17 @@ class PlanSettings:
                 "to 3600",
                 value=self.bound_time_s,
             )
+        if self.agl_band_m is not None:
+            FlightBand(*self.agl_band_m)
+            if self.altitude_m is not None:
+                raise SettingsError.about(
+                    "{agl_band_m} follows the terrain and {altitude_m} flies one plane: give one"
+                )
+            if self.solver == "approx":
+                raise SettingsError.about(
+                    "{solver} approx places its own stops on a plane: inside the band "
+                    "({agl_band_m}) use {solver} auto, exact, heuristic or ortools"
+                )
         if self.band is not None and self.band < 1:
             raise SettingsError.about(
                 "{band} {value} is below 1: bands are numbered from 1", value=self.band
@@ -261,6 +276,8 @@ def plan_settings(values: Mapping[str, Any]) -> PlanSettings:
         )
     if "home" in given:
         given["home"] = parse_latlon(given["home"], "home")
+    if "agl" in given:
+        given["agl"] = parse_band(given["agl"])
     top: dict[str, Any] = {}
     nested: dict[str, dict[str, Any]] = {"solve": {}, "mission": {}}
     for o in PLAN_OPTIONS:

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import time
 
+from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
+from urpt_gcs.solvers import Tour, choose, prepare, solve
 
 
 class Stages:
@@ -41,4 +44,32 @@ class Stages:
         self._clock = now
 
 
-__all__ = ["Stages"]
+def solve_stage(instance: Instance, settings: PlanSettings, stages: Stages) -> Tour:
+    """The solver's tour over the viewpoints, its kernels compiled first so that its time
+    limit is spent searching.
+
+    Parameters
+    ----------
+    instance
+        The viewpoints, what each sees and what flying between them costs.
+    settings
+        The plan's settings (``solver`` and ``solve``).
+    stages
+        Announces the compile and the solve and keeps their times.
+
+    Returns
+    -------
+    Tour
+        The solver's tour.
+    """
+    solver = choose(instance, settings.solver)
+    stages.say(f"preparing the {solver} solver (compiled on first use)")
+    prepare(solver)
+    stages.lap("compile")
+    stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
+    tour = solve(instance, solver, settings.solve)
+    stages.lap("solve")
+    return tour
+
+
+__all__ = ["Stages", "solve_stage"]

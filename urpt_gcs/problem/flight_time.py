@@ -29,6 +29,8 @@ __all__ = [
     "ARDUCOPTER_TOUCHDOWN_S",
     "FlightModel",
     "Sortie",
+    "SortieLegs",
+    "cut_sorties",
     "split_sorties",
 ]
 
@@ -206,6 +208,39 @@ class FlightModel:
         """Time of the leg home, from rest at the last stop to rest over home."""
         return self.leg_s(length_m, self.return_m_s)
 
+    def climb_s(self, rise_m: FloatArray | float) -> FloatArray:
+        """Time of a change of height alone: up at ``climb_m_s``, down at ``descent_m_s``."""
+        dz = np.asarray(rise_m, dtype=np.float64)
+        out: FloatArray = np.where(dz > 0.0, dz / self.climb_m_s, -dz / self.descent_m_s)
+        return out
+
+    def leg3_s(
+        self,
+        length_m: FloatArray | float,
+        rise_m: FloatArray | float,
+        vertical_s: FloatArray | float | None = None,
+    ) -> FloatArray:
+        """Time of a leg from rest to rest that also climbs ``rise_m`` (negative: descends).
+
+        The firmware holds the horizontal speed within the cruise speed and the vertical
+        within the climb or descent rate: where the height changes faster than the cruise
+        allows, the leg takes the vertical time instead. ``vertical_s``, when given, is the
+        time the leg's pieces need for their climbs and descents beyond their horizontal
+        time (a path that follows the terrain); else that of one straight piece.
+        """
+        d = np.asarray(length_m, dtype=np.float64)
+        if vertical_s is None:
+            vertical_s = np.maximum(self.climb_s(rise_m) - d / self.cruise_m_s, 0.0)
+        out: FloatArray = self.leg_s(d) + np.asarray(vertical_s, dtype=np.float64)
+        return out
+
+    def vertical_excess_s(self, length_m: FloatArray, rise_m: FloatArray) -> float:
+        """What the pieces of one path spend climbing or descending beyond their horizontal
+        time: each piece takes the slower of the two."""
+        return float(
+            np.maximum(self.climb_s(rise_m) - np.asarray(length_m) / self.cruise_m_s, 0.0).sum()
+        )
+
     def takeoff_s(self, altitude_rel_m: float) -> float:
         """From arming to the plane: the start, and the climb from rest to rest."""
         v, a = self.climb_m_s, self.climb_accel_m_s2
@@ -269,18 +304,66 @@ def split_sorties(
     home = np.asarray(home_xy, dtype=np.float64)
     to_home = np.hypot(*(stops_xy - home).T)
     hops = np.hypot(*np.diff(stops_xy, axis=0).T) if k > 1 else np.zeros(0)
-    along = np.concatenate([[0.0], np.cumsum(hops)])  # path length from stop 0 to stop j
-    # Time of the hops from stop 0 to stop j, their stops included; a sortie adds its legs
-    # from home (at the cruise speed) and back (at the return speed), its last stop, the
-    # take-off and the landing.
-    hop_s = np.concatenate([[0.0], np.cumsum(model.leg_s(hops) + model.stop_s)])
-    out_s = model.leg_s(to_home)
-    back_s = model.return_s(to_home)
-    ends_s = model.takeoff_s(altitude_rel_m) + model.stop_s + model.landing_s(altitude_rel_m)
+    # A sortie adds its legs from home (at the cruise speed) and back (at the return speed),
+    # its last stop, the take-off and the landing to the hops between its stops.
+    return cut_sorties(
+        SortieLegs(
+            out_m=to_home,
+            hop_m=hops,
+            back_m=to_home,
+            out_s=model.leg_s(to_home),
+            hop_s=model.leg_s(hops) + model.stop_s,
+            back_s=model.return_s(to_home),
+            ends_s=model.takeoff_s(altitude_rel_m) + model.stop_s + model.landing_s(altitude_rel_m),
+        ),
+        endurance_s,
+        names,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class SortieLegs:
+    """What flying the tour's stops in order costs, for cutting it into sorties.
+
+    Attributes
+    ----------
+    out_m, out_s
+        From home to each stop: length and time (take-off aside).
+    hop_m, hop_s
+        From each stop to the next (one fewer): length, and time with the stop at its start.
+    back_m, back_s
+        From each stop back over home: length and time (landing aside).
+    ends_s
+        What every sortie adds: the take-off, its last stop and the landing.
+    """
+
+    out_m: FloatArray
+    hop_m: FloatArray
+    back_m: FloatArray
+    out_s: FloatArray
+    hop_s: FloatArray
+    back_s: FloatArray
+    ends_s: float
+
+
+def cut_sorties(
+    legs: SortieLegs, endurance_s: float | None, names: list[str]
+) -> tuple[Sortie, ...]:
+    """Cut stops flown in order into the sorties of least total flight time that each fit
+    ``endurance_s`` (dynamic programming over cut points; one sortie if it fits).
+
+    Raises
+    ------
+    PlanError
+        A stop that alone takes a sortie over the endurance.
+    """
+    k = len(legs.out_m)
+    along = np.concatenate([[0.0], np.cumsum(legs.hop_m)])  # path length from stop 0 to j
+    hop_s = np.concatenate([[0.0], np.cumsum(legs.hop_s)])
 
     def sortie(i: int, j: int) -> Sortie:  # stops i .. j-1
-        length = float(to_home[i] + along[j - 1] - along[i] + to_home[j - 1])
-        time_s = float(out_s[i] + hop_s[j - 1] - hop_s[i] + back_s[j - 1] + ends_s)
+        length = float(legs.out_m[i] + along[j - 1] - along[i] + legs.back_m[j - 1])
+        time_s = float(legs.out_s[i] + hop_s[j - 1] - hop_s[i] + legs.back_s[j - 1] + legs.ends_s)
         return Sortie(i, j, length, time_s)
 
     whole = sortie(0, k)

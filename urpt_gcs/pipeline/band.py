@@ -1,0 +1,518 @@
+"""The plan inside a height band (``--agl FLOOR:CEILING``): a flight that follows the terrain.
+
+The stage chain of :func:`~urpt_gcs.pipeline.planner.plan` with the flight plane replaced
+by the band:
+
+1. viewpoints in three dimensions inside the band, with what each sees from anywhere within
+   the position tolerance (:mod:`urpt_gcs.visibility.band`);
+2. the tour over them, its legs costed in flight time (horizontal, climb and descent limits
+   of the flight model) between straight legs -- the solver core sees points, cover sets
+   and a table of times;
+3. every leg made to follow the terrain inside the band, waypoints without a photo inserted
+   where a straight leg would leave it (:mod:`urpt_gcs.flight.band`), cut into sorties by
+   flight time, written as missions whose waypoints each carry their own height above home,
+   and checked as written;
+4. the certificate: a lower bound of the horizontal length of any flight in the band that
+   sees every target, and from it a lower bound of the flight time.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
+from urpt_gcs.bound.certificate import Certificate, bound_time_s
+from urpt_gcs.bound.geometric import greedy_disjoint
+from urpt_gcs.bound.lower_bound import lower_bound
+from urpt_gcs.errors import PlanError
+from urpt_gcs.flight.band import FlightBand, band_profile
+from urpt_gcs.flight.follow import path_in_band
+from urpt_gcs.flight.mission import GeoPoint, Mission, build_mission
+from urpt_gcs.flight.safety import Leg, geofence_polygon
+from urpt_gcs.memory import require_memory
+from urpt_gcs.pipeline.area import PlanArea, SiteInputs, latlon_to_xy, xy_to_latlon
+from urpt_gcs.pipeline.missions import flight_model
+from urpt_gcs.pipeline.result import BandFlight, Plan
+from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.pipeline.stages import Stages, solve_stage
+from urpt_gcs.problem.flight_time import FlightModel, Sortie, SortieLegs, cut_sorties
+from urpt_gcs.problem.instance import Covers, Instance
+from urpt_gcs.problem.regions import RegionSet
+from urpt_gcs.site.camera import true_bearing_deg
+from urpt_gcs.site.reading import fill_along
+from urpt_gcs.site.terrain import Terrain
+from urpt_gcs.solvers import Tour
+from urpt_gcs.visibility.band import BandViewpoints, band_levels, band_viewpoints, sees_from
+
+__all__ = ["MAX_BAND_VIEWPOINTS", "outer_radii", "plan_in_band"]
+
+# Candidates the band offers the solver at most: its table of leg times is dense.
+MAX_BAND_VIEWPOINTS = 4000
+# Heights are written in whole centimetres.
+_CM = 100.0
+# Rounds of the outer discs' fixed point (each round only shrinks them).
+_OUTER_ROUNDS = 8
+# How much wider than a disc's radius, in cells, the window searched for its highest corner.
+_WINDOW_SLACK = 1.5
+
+
+def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stages: Stages) -> Plan:
+    """Plan a flight that photographs every target from inside the height band.
+
+    Parameters
+    ----------
+    site, area
+        The site and the DEM window (read for the plane at the band's ceiling over the
+        highest terrain, which holds every cone the band can reach).
+    settings
+        The plan's settings; ``agl_band_m`` gives the band.
+    stages
+        Announces each stage and keeps its time.
+
+    Returns
+    -------
+    Plan
+        The checked flight, its missions and its certificate; ``band_flight`` holds the
+        paths in three dimensions.
+    """
+    assert settings.agl_band_m is not None
+    band = FlightBand(*settings.agl_band_m)
+    model = flight_model(settings)
+    tol = settings.position_tolerance_m
+    stages.say(f"viewpoints of {len(site.names)} targets inside the band {band.describe()}")
+    views = band_viewpoints(
+        area.terrain,
+        area.camera,
+        site.targets_xy,
+        area.ground_m,
+        band.floor_m,
+        band.ceiling_m,
+        tol,
+        MAX_BAND_VIEWPOINTS,
+        site.names,
+        settings.workers,
+    )
+    stages.lap("viewpoints")
+    takeoff_m = float(np.ceil(band_levels(band.floor_m, band.ceiling_m, tol)[0] * _CM) / _CM)
+    home_xyz = np.array([*site.home_xy, area.home_ground_m + takeoff_m])
+    instance = _time_instance(views, home_xyz, model, takeoff_m, site.targets_xy.shape[0])
+    stages.lap("costs")
+    tour = solve_stage(instance, settings, stages)
+    order = np.asarray(tour.order, dtype=np.int64)
+    stops = views.xyz[order]
+    headings = None if views.heading_deg is None else views.heading_deg[order]
+    stages.say("following the terrain between the stops")
+    flight = _fly(site, area, band, model, settings, stops, home_xyz, takeoff_m, tour, headings)
+    stages.lap("sorties")
+    certificate = None
+    time_bound = horizontal_bound = 0.0
+    if settings.certify:
+        budget = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
+        stages.say(f"bounding the shortest possible flight in the band (up to {budget:.1f} s)")
+        horizontal_m = math.fsum(s.length_m for s in flight.sorties)
+        certificate = _certify(site, area, band, horizontal_m, budget)
+        horizontal_bound = certificate.lower_bound_m
+        time_bound = _time_bound(site, area, band, model, horizontal_bound, takeoff_m, tol)
+        stages.lap("bound")
+    band_flight = BandFlight(
+        band=band,
+        stops_xyz=stops,
+        paths_xyz=flight.paths,
+        path_stop=flight.path_stop,
+        lowest_m=flight.lowest_m,
+        highest_m=flight.highest_m,
+        time_bound_s=time_bound,
+        horizontal_bound_m=horizontal_bound,
+        estimate_s=float(tour.length),
+    )
+    return Plan(
+        settings=settings,
+        dem=site.dem,
+        terrain=area.terrain,
+        targets=site.targets,
+        crs=site.crs,
+        targets_xy=site.targets_xy,
+        ground_m=area.ground_m,
+        home_xy=site.home_xy,
+        home_ground_m=area.home_ground_m,
+        home_source=site.home_source,
+        camera=area.camera,
+        terrain_max_m=area.terrain_max_m,
+        regions=(),
+        instance=instance,
+        tour=tour,
+        legs=flight.legs,
+        sorties=flight.sorties,
+        missions=flight.missions,
+        geofence_latlon=flight.geofence_latlon,
+        flight_time_s=sum(s.flight_time_s for s in flight.sorties),
+        timings_s=stages.timings_s,
+        warnings=tuple(flight.warnings),
+        certificate=certificate,
+        optimal_over_candidates=tour.proven_optimal,
+        band_flight=band_flight,
+    )
+
+
+def _time_instance(
+    views: BandViewpoints, home_xyz: FloatArray, model: FlightModel, takeoff_m: float, m: int
+) -> Instance:
+    """The GTSP over the band's candidates, costed in seconds of flight: straight legs at
+    the flight model's horizontal and vertical limits, each arrival paying its stop; from
+    home the take-off and to home the landing."""
+    n = len(views.xyz)
+    require_memory(
+        3.0 * 8.0 * n * n,
+        f"the flight-time table of {n} candidates in the band",
+        "plan fewer targets at a time in the band",
+    )
+    xyz = views.xyz
+    table = np.empty((n, n))
+    for lo in range(0, n, 512):
+        d = np.hypot(
+            xyz[lo : lo + 512, None, 0] - xyz[None, :, 0],
+            xyz[lo : lo + 512, None, 1] - xyz[None, :, 1],
+        )
+        rise = xyz[None, :, 2] - xyz[lo : lo + 512, None, 2]
+        table[lo : lo + 512] = model.leg3_s(d, rise) + model.stop_s
+    np.fill_diagonal(table, 0.0)
+    d_home = np.hypot(xyz[:, 0] - home_xyz[0], xyz[:, 1] - home_xyz[1])
+    rise = xyz[:, 2] - home_xyz[2]
+    out = model.takeoff_s(takeoff_m) + model.leg3_s(d_home, rise) + model.stop_s
+    back = model.leg3_s(d_home, -rise) + model.landing_s(takeoff_m)
+    vp, tg = views.pairs
+    return Instance(
+        covers=Covers.from_pairs(vp, tg, n, m),
+        distance=table,
+        depot_distance=np.vstack([out, back]),
+        points_xy=np.ascontiguousarray(xyz[:, :2]),
+        owner=views.owner,
+        heading_deg=views.heading_deg,
+        name="band",
+    )
+
+
+class _Flight:
+    """The band's flight as written: sorties, missions, paths and their checks."""
+
+    def __init__(
+        self,
+        sorties: tuple[Sortie, ...],
+        missions: tuple[Mission, ...],
+        paths: tuple[FloatArray, ...],
+        path_stop: tuple[IntArray, ...],
+        legs: tuple[Leg, ...],
+        lowest_m: float,
+        highest_m: float,
+        geofence_latlon: tuple[tuple[float, float], ...],
+        warnings: list[str],
+    ) -> None:
+        self.sorties = sorties
+        self.missions = missions
+        self.paths = paths
+        self.path_stop = path_stop
+        self.legs = legs
+        self.lowest_m = lowest_m
+        self.highest_m = highest_m
+        self.geofence_latlon = geofence_latlon
+        self.warnings = warnings
+
+
+def _fly(
+    site: SiteInputs,
+    area: PlanArea,
+    band: FlightBand,
+    model: FlightModel,
+    settings: PlanSettings,
+    stops: FloatArray,
+    home_xyz: FloatArray,
+    takeoff_m: float,
+    tour: Tour,
+    headings: FloatArray | None,
+) -> _Flight:
+    """Follow the terrain between the stops, cut the sorties, write and check the missions."""
+    k = len(stops)
+    terrain = area.terrain
+    names = [f"stop {i + 1}" for i in range(k)]
+    # Every leg the sorties might fly: home to each stop, each stop to the next, each back.
+    outs = [_follow(site, terrain, home_xyz, stops[i], band) for i in range(k)]
+    hops = [_follow(site, terrain, stops[i], stops[i + 1], band) for i in range(k - 1)]
+    backs = [_follow(site, terrain, stops[i], home_xyz, band) for i in range(k)]
+    legs = SortieLegs(
+        out_m=np.array([_horizontal(p) for p in outs]),
+        hop_m=np.array([_horizontal(p) for p in hops]),
+        back_m=np.array([_horizontal(p) for p in backs]),
+        out_s=np.array([_path_s(model, p) for p in outs]),
+        hop_s=np.array([_path_s(model, p) + model.stop_s for p in hops]),
+        back_s=np.array([_path_s(model, p) for p in backs]),
+        ends_s=model.takeoff_s(takeoff_m) + model.stop_s + model.landing_s(takeoff_m),
+    )
+    endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
+    sorties = cut_sorties(legs, endurance, names)
+    home = GeoPoint(*site.home_lat_lon, math.floor(area.home_ground_m * _CM) / _CM)
+    true_headings = _true_headings(site, stops, headings)
+    missions, paths, path_stop = [], [], []
+    for s in sorties:
+        pieces = [outs[s.first]] + [hops[i] for i in range(s.first, s.stop - 1)]
+        pieces.append(backs[s.stop - 1])
+        path = np.vstack([pieces[0]] + [p[1:] for p in pieces[1:]])
+        stop_of = np.full(len(path), -1, dtype=np.int64)
+        at = 0
+        for i, piece in zip(range(s.first, s.stop), pieces, strict=False):
+            at += len(piece) - 1
+            stop_of[at] = i
+        stop_of[0] = stop_of[-1] = -2
+        inner = path[1:]  # the take-off climbs to path[0]; the last point is over home
+        latlon = xy_to_latlon(site.crs, inner[:, :2])
+        heights = [math.floor((z - home.amsl_m) * _CM + 0.5) / _CM for z in inner[:, 2]]
+        missions.append(
+            build_mission(
+                home,
+                latlon,
+                takeoff_m,
+                settings.mission,
+                None if true_headings is None else true_headings[s.first : s.stop].tolist(),
+                heights,
+                [bool(v >= 0) for v in stop_of[1:]],
+            )
+        )
+        paths.append(path)
+        path_stop.append(stop_of)
+    written, checked_legs, lowest, highest = _check_written(
+        site, area, band, tuple(missions), tuple(path_stop), tour.sees, settings, headings
+    )
+    warnings = []
+    if len(sorties) > 1:
+        warnings.append(
+            f"the tour needs {len(sorties)} sorties to fit --endurance "
+            f"{settings.endurance_min:g} min; each returns home"
+        )
+    fence_xy = geofence_polygon(
+        np.vstack([[site.home_xy], *(p[:, :2] for p in written), site.targets_xy]),
+        settings.geofence_margin_m,
+    )
+    return _Flight(
+        sorties,
+        tuple(missions),
+        tuple(written),
+        tuple(path_stop),
+        checked_legs,
+        lowest,
+        highest,
+        tuple(xy_to_latlon(site.crs, fence_xy)),
+        warnings,
+    )
+
+
+def _follow(
+    site: SiteInputs, terrain: Terrain, a: FloatArray, b: FloatArray, band: FlightBand
+) -> FloatArray:
+    """The path from ``a`` to ``b`` inside the band, both ends included."""
+    if np.allclose(a, b):
+        return np.vstack([a, b])
+    fill_along(site.dem, terrain, a[None, :2], b[None, :2])
+    path, _ = path_in_band(terrain, np.vstack([a, b]), band)
+    return path
+
+
+def _horizontal(path: FloatArray) -> float:
+    return float(np.hypot(*np.diff(path[:, :2], axis=0).T).sum())
+
+
+def _path_s(model: FlightModel, path: FloatArray) -> float:
+    """A path's time from rest to rest; its inner waypoints are flown through."""
+    d = np.hypot(*np.diff(path[:, :2], axis=0).T)
+    rise = np.diff(path[:, 2])
+    return float(model.leg3_s(d.sum(), 0.0, model.vertical_excess_s(d, rise)))
+
+
+def _true_headings(
+    site: SiteInputs, stops: FloatArray, headings: FloatArray | None
+) -> FloatArray | None:
+    """Each stop's heading as the mission gives it (true north), for a frame camera."""
+    if headings is None:
+        return None
+    true: FloatArray = true_bearing_deg(site.crs, stops[:, :2], headings % 180.0)
+    return np.round(true, 2) % 360.0
+
+
+def _check_written(
+    site: SiteInputs,
+    area: PlanArea,
+    band: FlightBand,
+    missions: tuple[Mission, ...],
+    path_stop: tuple[IntArray, ...],
+    sees: BoolArray,
+    settings: PlanSettings,
+    headings: FloatArray | None,
+) -> tuple[list[FloatArray], tuple[Leg, ...], float, float]:
+    """Check the missions as the vehicle stores them (positions on the 1e-7 degree grid,
+    heights in whole centimetres above the home written): every stop sees what the plan says
+    it sees, and every leg lies inside the band everywhere."""
+    written: list[FloatArray] = []
+    legs: list[Leg] = []
+    lowest, highest = math.inf, -math.inf
+    for mission, stop_of in zip(missions, path_stop, strict=True):
+        home = mission.home
+        wps = [
+            (item.params[4], item.params[5], item.params[6])
+            for item in mission.items
+            if item.command == 16  # MAV_CMD_NAV_WAYPOINT
+        ]
+        home_xy = latlon_to_xy(site.crs, [(home.lat_deg, home.lon_deg)])[0]
+        xy = latlon_to_xy(site.crs, [(lat, lon) for lat, lon, _ in wps])
+        z = np.array([home.amsl_m + h for _, _, h in wps])
+        path = np.vstack(
+            [[*home_xy, home.amsl_m + mission.altitude_rel_m], np.column_stack([xy, z])]
+        )
+        written.append(path)
+        profile = band_profile(area.terrain, path[:-1], path[1:])
+        low = float(profile.lowest_m.min())
+        high = float(profile.highest_m.max())
+        lowest, highest = min(lowest, low), max(highest, high)
+        bad = np.flatnonzero(
+            (profile.lowest_m < band.floor_m - 1e-6)
+            | (profile.highest_m > band.ceiling_m + 1e-6)
+            | (profile.unknown_fraction > 0.0)
+        )
+        if bad.size:
+            i = int(bad[0])
+            raise PlanError(
+                f"leg {i + 1} of a sortie leaves the band {band.describe()} as written "
+                f"({profile.lowest_m[i]:.1f} to {profile.highest_m[i]:.1f} m above the "
+                "surface): widen --agl or report this"
+            )
+        names = ["home" if s == -2 else ("waypoint" if s < 0 else f"stop {s + 1}") for s in stop_of]
+        lengths = np.hypot(*np.diff(path[:, :2], axis=0).T)
+        legs.extend(
+            Leg(names[i], names[i + 1], float(lengths[i]), float(profile.lowest_m[i]), 0.0)
+            for i in range(len(path) - 1)
+        )
+        mask = stop_of >= 0
+        stop_ids = stop_of[mask]
+        eyes = path[mask]
+        t_idx = [np.flatnonzero(sees[s]) for s in stop_ids]
+        v = np.concatenate([np.full(len(t), k) for k, t in enumerate(t_idx)]).astype(np.int64)
+        t = np.concatenate(t_idx).astype(np.int64)
+        seen = sees_from(
+            area.terrain,
+            area.camera,
+            eyes[v],
+            site.targets_xy[t],
+            area.ground_m[t],
+            None if headings is None else headings[stop_ids][v],
+            0.0,
+            settings.workers,
+        )
+        if not seen.all():
+            k = int(np.flatnonzero(~seen)[0])
+            raise PlanError(
+                f"stop {int(stop_ids[v[k]]) + 1} no longer sees target '{site.names[t[k]]}' as "
+                "written to the mission: raise --position-tolerance or report this"
+            )
+    return written, tuple(legs), lowest, highest
+
+
+def outer_radii(
+    terrain: Terrain,
+    targets_xy: FloatArray,
+    ground_m: FloatArray,
+    tan_fov: float,
+    far_m: float,
+    ceiling_m: float,
+    top_m: float,
+) -> FloatArray:
+    """Per target, a radius no viewpoint inside the band that sees it lies beyond.
+
+    A point at horizontal distance ``d`` that sees a target ``g`` below it in the cone has
+    ``d <= (z - g) tan``, and inside the band ``z`` is at most the ceiling over the surface
+    there; so ``d <= (S(d) + ceiling - g) tan`` with ``S(d)`` the highest surface within
+    ``d``. From ``top_m`` (the highest terrain read) the radius shrinks to that fixed point,
+    each round with the highest DEM corner within the last radius (bilinear heights never
+    pass their corners), within the GSD distance.
+    """
+    z = terrain.elevation_m
+    rows, cols = z.shape
+    cols_c, rows_c = terrain.pixel_coords(targets_xy[:, 0], targets_xy[:, 1])
+    cell = terrain.cell_m
+    radius = np.maximum(top_m + ceiling_m - ground_m, 0.0) * tan_fov
+    for _ in range(_OUTER_ROUNDS):
+        highest = np.empty(len(radius))
+        for i, r in enumerate(radius):
+            # Wider than the disc: a fitted grid's cells need not be square.
+            reach = math.ceil(_WINDOW_SLACK * r / cell) + 2
+            c0, r0 = math.floor(cols_c[i]), math.floor(rows_c[i])
+            window = z[
+                max(r0 - reach, 0) : min(r0 + reach + 2, rows),
+                max(c0 - reach, 0) : min(c0 + reach + 2, cols),
+            ]
+            # Unknown ground may be anything: keep the last radius there.
+            highest[i] = top_m if np.isnan(window).any() else float(np.max(window))
+        radius = np.minimum(radius, np.maximum(highest + ceiling_m - ground_m, 0.0) * tan_fov)
+    if math.isfinite(far_m):
+        radius = np.minimum(radius, far_m)
+    out: FloatArray = radius
+    return out
+
+
+def _certify(
+    site: SiteInputs, area: PlanArea, band: FlightBand, horizontal_m: float, budget_s: float
+) -> Certificate:
+    """A lower bound of the horizontal length of any flight from home inside the band that
+    photographs every target: the shortest closed path from home through every target's
+    outer disc (:func:`outer_radii`), bounded by the same search as the plane's."""
+    radii = outer_radii(
+        area.terrain,
+        site.targets_xy,
+        area.ground_m,
+        area.camera.tan_fov,
+        area.camera.max_distance_m,
+        band.ceiling_m,
+        area.terrain_max_m,
+    )
+    discs = np.column_stack([site.targets_xy, radii])
+    regions = RegionSet(discs=discs, depot_xy=site.home_xy)
+    bound = lower_bound(regions, horizontal_m, budget_s)
+    return Certificate(
+        min(bound.value, horizontal_m),
+        f"{bound.method} over outer discs in the band",
+        bound.seconds,
+        0,
+        math.nan,
+        bound.relaxed_tour_xy,
+    )
+
+
+def _time_bound(
+    site: SiteInputs,
+    area: PlanArea,
+    band: FlightBand,
+    model: FlightModel,
+    horizontal_m: float,
+    takeoff_m: float,
+    tolerance_m: float,
+) -> float:
+    """A lower bound of the flight time of any flight in the band that photographs every
+    target: the take-off to the band's floor and the landing from it, the horizontal bound
+    at the faster of the cruise and return speeds, and a stop for each of a set of targets
+    no single photo can hold two of (their outer discs apart)."""
+    radii = outer_radii(
+        area.terrain,
+        site.targets_xy,
+        area.ground_m,
+        area.camera.tan_fov,
+        area.camera.max_distance_m,
+        band.ceiling_m,
+        area.terrain_max_m,
+    )
+    photos = len(greedy_disjoint(site.targets_xy, float(radii.max()))) if len(radii) else 0
+    speed = max(model.cruise_m_s, model.return_m_s)
+    floor = min(band.floor_m, takeoff_m)
+    return (
+        model.takeoff_s(floor)
+        + model.landing_s(floor)
+        + horizontal_m / speed
+        + max(photos, 1) * model.stop_s
+    )
