@@ -19,6 +19,7 @@ by the band:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,7 +47,7 @@ from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.band import BandViewpoints, band_levels, band_viewpoints, sees_from
 
-__all__ = ["MAX_BAND_VIEWPOINTS", "outer_radii", "plan_in_band"]
+__all__ = ["MAX_BAND_VIEWPOINTS", "OuterDiscs", "outer_discs", "plan_in_band"]
 
 # Candidates the band offers the solver at most: its table of leg times is dense.
 MAX_BAND_VIEWPOINTS = 4000
@@ -97,7 +98,16 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
     stages.lap("viewpoints")
     takeoff_m = float(np.ceil(band_levels(band.floor_m, band.ceiling_m, tol)[0] * _CM) / _CM)
     home_xyz = np.array([*site.home_xy, area.home_ground_m + takeoff_m])
-    instance = _time_instance(views, home_xyz, model, takeoff_m, site.targets_xy.shape[0])
+    instance = _time_instance(
+        area.terrain,
+        band,
+        views,
+        home_xyz,
+        model,
+        takeoff_m,
+        site.targets_xy.shape[0],
+        settings.workers,
+    )
     stages.lap("costs")
     tour = solve_stage(instance, settings, stages)
     order = np.asarray(tour.order, dtype=np.int64)
@@ -114,7 +124,7 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
         horizontal_m = math.fsum(s.length_m for s in flight.sorties)
         certificate = _certify(site, area, band, horizontal_m, budget)
         horizontal_bound = certificate.lower_bound_m
-        time_bound = _time_bound(site, area, band, model, horizontal_bound, takeoff_m, tol)
+        time_bound = _time_bound(site, area, band, model, horizontal_bound)
         stages.lap("bound")
     band_flight = BandFlight(
         band=band,
@@ -157,41 +167,83 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
 
 
 def _time_instance(
-    views: BandViewpoints, home_xyz: FloatArray, model: FlightModel, takeoff_m: float, m: int
+    terrain: Terrain,
+    band: FlightBand,
+    views: BandViewpoints,
+    home_xyz: FloatArray,
+    model: FlightModel,
+    takeoff_m: float,
+    m: int,
+    workers: int | None,
 ) -> Instance:
-    """The GTSP over the band's candidates, costed in seconds of flight: straight legs at
-    the flight model's horizontal and vertical limits, each arrival paying its stop; from
-    home the take-off and to home the landing."""
+    """The GTSP over the band's candidates, costed in seconds of flight, each arrival paying
+    its stop; from home the take-off and to home the landing.
+
+    A leg's time is the flight model's for its horizontal length and the least climbing and
+    descending that following the terrain inside the band needs there (:func:`_vertical_s`):
+    never more than the path flown will take, and exact for a straight leg that stays in
+    the band."""
     n = len(views.xyz)
     require_memory(
-        3.0 * 8.0 * n * n,
+        6.0 * 8.0 * n * n,
         f"the flight-time table of {n} candidates in the band",
         "plan fewer targets at a time in the band",
     )
-    xyz = views.xyz
-    table = np.empty((n, n))
-    for lo in range(0, n, 512):
-        d = np.hypot(
-            xyz[lo : lo + 512, None, 0] - xyz[None, :, 0],
-            xyz[lo : lo + 512, None, 1] - xyz[None, :, 1],
-        )
-        rise = xyz[None, :, 2] - xyz[lo : lo + 512, None, 2]
-        table[lo : lo + 512] = model.leg3_s(d, rise) + model.stop_s
+    xyz = np.vstack([views.xyz, home_xyz[None, :]])
+    i, j = np.triu_indices(n + 1, k=1)
+    a = np.column_stack([xyz[i, :2], np.zeros(len(i))])
+    b = np.column_stack([xyz[j, :2], np.zeros(len(j))])
+    # Lines at height 0: their lowest height above the surface is minus its highest point.
+    profile = band_profile(terrain, a, b, workers)
+    peak = np.where(np.isfinite(profile.lowest_m), -profile.lowest_m, -np.inf) + band.floor_m
+    trough = np.where(np.isfinite(profile.highest_m), -profile.highest_m, np.inf) + band.ceiling_m
+    d = np.hypot(xyz[j, 0] - xyz[i, 0], xyz[j, 1] - xyz[i, 1])
+    forth = model.leg3_s(d, 0.0, _vertical_s(model, d, xyz[i, 2], xyz[j, 2], peak, trough))
+    back = model.leg3_s(d, 0.0, _vertical_s(model, d, xyz[j, 2], xyz[i, 2], peak, trough))
+    full = np.zeros((n + 1, n + 1))
+    full[i, j] = forth
+    full[j, i] = back
+    table = np.ascontiguousarray(full[:n, :n] + model.stop_s)
     np.fill_diagonal(table, 0.0)
-    d_home = np.hypot(xyz[:, 0] - home_xyz[0], xyz[:, 1] - home_xyz[1])
-    rise = xyz[:, 2] - home_xyz[2]
-    out = model.takeoff_s(takeoff_m) + model.leg3_s(d_home, rise) + model.stop_s
-    back = model.leg3_s(d_home, -rise) + model.landing_s(takeoff_m)
+    out = model.takeoff_s(takeoff_m) + full[n, :n] + model.stop_s
+    home = full[:n, n] + model.landing_s(takeoff_m)
     vp, tg = views.pairs
     return Instance(
         covers=Covers.from_pairs(vp, tg, n, m),
         distance=table,
-        depot_distance=np.vstack([out, back]),
-        points_xy=np.ascontiguousarray(xyz[:, :2]),
+        depot_distance=np.vstack([out, home]),
+        points_xy=np.ascontiguousarray(views.xyz[:, :2]),
         owner=views.owner,
         heading_deg=views.heading_deg,
         name="band",
     )
+
+
+def _vertical_s(
+    model: FlightModel,
+    length_m: FloatArray,
+    start_m: FloatArray,
+    end_m: FloatArray,
+    peak_m: FloatArray,
+    trough_m: FloatArray,
+) -> FloatArray:
+    """What a leg's climbs and descents take beyond its horizontal time, at the least.
+
+    Inside the band the vehicle must rise to ``peak_m`` (the floor over the highest ground
+    under the leg) and sink to ``trough_m`` (the ceiling over the lowest), in one order or
+    the other, between its start and end heights: the cheaper order's climbs at the climb
+    rate and descents at the descent rate.
+    """
+    hi = np.maximum(np.maximum(start_m, end_m), peak_m)
+    lo = np.minimum(np.minimum(start_m, end_m), trough_m)
+    best = np.full(len(length_m), np.inf)
+    for first, second in ((hi, lo), (lo, hi)):
+        steps = (first - start_m, second - first, end_m - second)
+        up = sum(np.maximum(x, 0.0) for x in steps)
+        down = sum(np.maximum(-x, 0.0) for x in steps)
+        best = np.minimum(best, up / model.climb_m_s + down / model.descent_m_s)
+    out: FloatArray = np.maximum(best - length_m / model.cruise_m_s, 0.0)
+    return out
 
 
 class _Flight:
@@ -415,7 +467,17 @@ def _check_written(
     return written, tuple(legs), lowest, highest
 
 
-def outer_radii(
+@dataclass(frozen=True, slots=True)
+class OuterDiscs:
+    """Per target, a disc no viewpoint inside the band that sees it lies beyond, and the
+    lowest and highest DEM corner within it."""
+
+    radius_m: FloatArray
+    lowest_m: FloatArray
+    highest_m: FloatArray
+
+
+def outer_discs(
     terrain: Terrain,
     targets_xy: FloatArray,
     ground_m: FloatArray,
@@ -423,7 +485,7 @@ def outer_radii(
     far_m: float,
     ceiling_m: float,
     top_m: float,
-) -> FloatArray:
+) -> OuterDiscs:
     """Per target, a radius no viewpoint inside the band that sees it lies beyond.
 
     A point at horizontal distance ``d`` that sees a target ``g`` below it in the cone has
@@ -438,8 +500,11 @@ def outer_radii(
     cols_c, rows_c = terrain.pixel_coords(targets_xy[:, 0], targets_xy[:, 1])
     cell = terrain.cell_m
     radius = np.maximum(top_m + ceiling_m - ground_m, 0.0) * tan_fov
+    if math.isfinite(far_m):
+        radius = np.minimum(radius, far_m)
+    lowest = np.full(len(radius), -np.inf)
+    highest = np.full(len(radius), np.inf)
     for _ in range(_OUTER_ROUNDS):
-        highest = np.empty(len(radius))
         for i, r in enumerate(radius):
             # Wider than the disc: a fitted grid's cells need not be square.
             reach = math.ceil(_WINDOW_SLACK * r / cell) + 2
@@ -448,13 +513,13 @@ def outer_radii(
                 max(r0 - reach, 0) : min(r0 + reach + 2, rows),
                 max(c0 - reach, 0) : min(c0 + reach + 2, cols),
             ]
-            # Unknown ground may be anything: keep the last radius there.
-            highest[i] = top_m if np.isnan(window).any() else float(np.max(window))
+            # Unknown ground may be anything: keep the widest answer there.
+            if np.isnan(window).any() or window.size == 0:
+                lowest[i], highest[i] = -np.inf, top_m
+            else:
+                lowest[i], highest[i] = float(np.min(window)), float(np.max(window))
         radius = np.minimum(radius, np.maximum(highest + ceiling_m - ground_m, 0.0) * tan_fov)
-    if math.isfinite(far_m):
-        radius = np.minimum(radius, far_m)
-    out: FloatArray = radius
-    return out
+    return OuterDiscs(radius, lowest, highest)
 
 
 def _certify(
@@ -463,16 +528,8 @@ def _certify(
     """A lower bound of the horizontal length of any flight from home inside the band that
     photographs every target: the shortest closed path from home through every target's
     outer disc (:func:`outer_radii`), bounded by the same search as the plane's."""
-    radii = outer_radii(
-        area.terrain,
-        site.targets_xy,
-        area.ground_m,
-        area.camera.tan_fov,
-        area.camera.max_distance_m,
-        band.ceiling_m,
-        area.terrain_max_m,
-    )
-    discs = np.column_stack([site.targets_xy, radii])
+    outer = _outer(site, area, band)
+    discs = np.column_stack([site.targets_xy, outer.radius_m])
     regions = RegionSet(discs=discs, depot_xy=site.home_xy)
     bound = lower_bound(regions, horizontal_m, budget_s)
     return Certificate(
@@ -485,20 +542,8 @@ def _certify(
     )
 
 
-def _time_bound(
-    site: SiteInputs,
-    area: PlanArea,
-    band: FlightBand,
-    model: FlightModel,
-    horizontal_m: float,
-    takeoff_m: float,
-    tolerance_m: float,
-) -> float:
-    """A lower bound of the flight time of any flight in the band that photographs every
-    target: the take-off to the band's floor and the landing from it, the horizontal bound
-    at the faster of the cruise and return speeds, and a stop for each of a set of targets
-    no single photo can hold two of (their outer discs apart)."""
-    radii = outer_radii(
+def _outer(site: SiteInputs, area: PlanArea, band: FlightBand) -> OuterDiscs:
+    return outer_discs(
         area.terrain,
         site.targets_xy,
         area.ground_m,
@@ -507,12 +552,40 @@ def _time_bound(
         band.ceiling_m,
         area.terrain_max_m,
     )
-    photos = len(greedy_disjoint(site.targets_xy, float(radii.max()))) if len(radii) else 0
-    speed = max(model.cruise_m_s, model.return_m_s)
-    floor = min(band.floor_m, takeoff_m)
+
+
+def _time_bound(
+    site: SiteInputs,
+    area: PlanArea,
+    band: FlightBand,
+    model: FlightModel,
+    horizontal_m: float,
+) -> float:
+    """A lower bound of the flight time of any flight in the band that photographs every
+    target, as the flight model counts it.
+
+    The take-off to the band's floor over home and the landing from it; a stop for each of
+    a set of targets no single photo can hold two of (their outer discs apart); and the legs,
+    each of which takes at least its horizontal time and at least its vertical time. Their
+    horizontal lengths add up to at least the horizontal bound; their climbs to at least the
+    range of heights every such flight spans, less the take-off: it must rise to see the
+    target whose outer disc sits highest (above its ground, and the floor over the disc's
+    lowest corner) and sink to see the one whose disc sits lowest (the ceiling over its
+    highest corner), and it starts and ends at home; its descents likewise.
+    """
+    outer = _outer(site, area, band)
+    photos = len(greedy_disjoint(site.targets_xy, float(outer.radius_m.max())))
+    # Inside the band every leg is flown in AUTO at the mission's cruise speed: the way home
+    # too follows the terrain through waypoints (RTL would fly straight).
+    speed = model.cruise_m_s
+    home = area.home_ground_m
+    rise_to = max(float(np.max(np.maximum(area.ground_m, outer.lowest_m + band.floor_m))), home)
+    sink_to = min(float(np.min(outer.highest_m + band.ceiling_m)), home)
+    vertical = max(rise_to - sink_to - band.floor_m, 0.0)
+    legs = max(horizontal_m / speed, vertical / model.climb_m_s + vertical / model.descent_m_s)
     return (
-        model.takeoff_s(floor)
-        + model.landing_s(floor)
-        + horizontal_m / speed
+        model.takeoff_s(band.floor_m)
+        + model.landing_s(band.floor_m)
+        + legs
         + max(photos, 1) * model.stop_s
     )
