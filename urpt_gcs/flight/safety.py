@@ -106,7 +106,10 @@ def check_height_above_ground(
         f"--max-agl {max_agl_m:g} m"
     )
     if strict:
-        raise PlanError(f"{message}: lower --altitude/--clearance or raise --max-agl")
+        raise PlanError(
+            f"{message}: lower --altitude/--clearance, raise --max-agl, or follow the terrain "
+            "with --agl FLOOR:CEILING"
+        )
     return [message]
 
 
