@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.bound.certificate import Certificate, bound_time_s
@@ -51,6 +52,9 @@ __all__ = ["MAX_BAND_VIEWPOINTS", "OuterDiscs", "outer_discs", "plan_in_band"]
 
 # Candidates the band offers the solver at most: its table of leg times is dense.
 MAX_BAND_VIEWPOINTS = 4000
+# Candidates around each one whose legs to it are costed with the ground under them (a
+# tour's legs join near neighbours; a candidate's copies at three heights count thrice).
+_NEAR_COUNT = 300
 # Heights are written in whole centimetres.
 _CM = 100.0
 # Rounds of the outer discs' fixed point (each round only shrinks them).
@@ -191,13 +195,22 @@ def _time_instance(
     )
     xyz = np.vstack([views.xyz, home_xyz[None, :]])
     i, j = np.triu_indices(n + 1, k=1)
-    a = np.column_stack([xyz[i, :2], np.zeros(len(i))])
-    b = np.column_stack([xyz[j, :2], np.zeros(len(j))])
+    d = np.hypot(xyz[j, 0] - xyz[i, 0], xyz[j, 1] - xyz[i, 1])
+    # The ground under a leg only matters where the solver may fly it: between candidates
+    # near each other, and from and to home. Elsewhere the ends' heights alone (still never
+    # more than the path flown) keep the table cheap.
+    near = (d <= _near_m(xyz[:n, :2])) | (j == n)
+    peak = np.full(len(i), -np.inf)
+    trough = np.full(len(i), np.inf)
+    k = np.flatnonzero(near)
+    a = np.column_stack([xyz[i[k], :2], np.zeros(k.size)])
+    b = np.column_stack([xyz[j[k], :2], np.zeros(k.size)])
     # Lines at height 0: their lowest height above the surface is minus its highest point.
     profile = band_profile(terrain, a, b, workers)
-    peak = np.where(np.isfinite(profile.lowest_m), -profile.lowest_m, -np.inf) + band.floor_m
-    trough = np.where(np.isfinite(profile.highest_m), -profile.highest_m, np.inf) + band.ceiling_m
-    d = np.hypot(xyz[j, 0] - xyz[i, 0], xyz[j, 1] - xyz[i, 1])
+    peak[k] = np.where(np.isfinite(profile.lowest_m), -profile.lowest_m, -np.inf)
+    trough[k] = np.where(np.isfinite(profile.highest_m), -profile.highest_m, np.inf)
+    peak += band.floor_m
+    trough += band.ceiling_m
     forth = model.leg3_s(d, 0.0, _vertical_s(model, d, xyz[i, 2], xyz[j, 2], peak, trough))
     back = model.leg3_s(d, 0.0, _vertical_s(model, d, xyz[j, 2], xyz[i, 2], peak, trough))
     full = np.zeros((n + 1, n + 1))
@@ -217,6 +230,16 @@ def _time_instance(
         heading_deg=views.heading_deg,
         name="band",
     )
+
+
+def _near_m(points_xy: FloatArray) -> float:
+    """How far apart two candidates may be for the ground under the leg between them to be
+    costed: the distance within which each has its :data:`_NEAR_COUNT` nearest."""
+    if len(points_xy) <= _NEAR_COUNT:
+        return math.inf
+    tree = cKDTree(points_xy)
+    dist, _ = tree.query(points_xy, k=_NEAR_COUNT + 1)
+    return float(np.max(dist[:, -1]))
 
 
 def _vertical_s(
