@@ -12,10 +12,12 @@ from affine import Affine
 
 from urpt_gcs.flight.band import FlightBand
 from urpt_gcs.flight.follow import path_in_band
-from urpt_gcs.pipeline.band import _vertical_s, outer_discs
+from urpt_gcs.pipeline.band import _vertical_s
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.band import band_viewpoints, sees_from
+from urpt_gcs.visibility.band_outer import band_outer
+from urpt_gcs.visibility.outer import star_holds
 from urpt_gcs.visibility.regions import Camera
 
 CRS = pyproj.CRS.from_epsg(32632)
@@ -132,18 +134,15 @@ def test_every_viewpoint_that_sees_a_target_lies_in_its_outer_disc(seed: int) ->
     views = band_viewpoints(
         terrain, camera, targets, ground, 30.0, 120.0, 0.0, 4000, [f"T{k}" for k in range(10)]
     )
-    outer = outer_discs(
-        terrain,
-        targets,
-        ground,
-        camera.tan_fov,
-        math.inf,
-        BAND.ceiling_m,
-        float(terrain.elevation_m.max()),
-    )
+    top = float(terrain.elevation_m.max())
+    outer = band_outer(terrain, targets, ground, camera, BAND.ceiling_m, top, None)
     vp, tg = views.pairs
+    for v, t in zip(vp.tolist(), tg.tolist(), strict=True):
+        assert star_holds(outer.regions.outer[t], tuple(views.xyz[v, :2]))
     d = np.hypot(*(views.xyz[vp, :2] - targets[tg]).T)
     assert np.all(d <= outer.radius_m[tg] + 1e-9)
-    # The fixed point tightens the first, plane-high disc.
-    first = (terrain.elevation_m.max() + BAND.ceiling_m - ground) * camera.tan_fov
-    assert np.all(outer.radius_m <= first) and np.any(outer.radius_m < 0.9 * first)
+    # The fixed point tightens the plane-high disc, and more in some sectors than others.
+    first = (top + BAND.ceiling_m - ground) * camera.tan_fov
+    reach = np.array([s.reach_m for s in outer.regions.outer])
+    assert np.all(reach.max(axis=1) <= first + 1e-9) and np.any(reach.max(axis=1) < 0.9 * first)
+    assert np.any(reach.min(axis=1) < 0.9 * reach.max(axis=1))

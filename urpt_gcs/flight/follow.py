@@ -58,7 +58,7 @@ def follow_terrain(
     put as far on as a straight piece can reach while every sample between stays within the
     band (each sample bounds the piece's slope from above and below, so the slopes left are an
     interval), preferring the farthest point from which ``b`` is reached in turn, at the height
-    nearest ``aim_m`` above the surface that leaves some room; the piece is then checked
+    nearest ``aim_m`` above the surface (or the straight line on to ``b``) that leaves some room; the piece is then checked
     exactly (:func:`~urpt_gcs.flight.band.inside_band`) and drawn back until it passes. Samples
     are held a tenth of the band's width inside either limit where the given ends allow. Where
     no piece between two samples passes, the leg is sampled again 4 and then 16 times finer.
@@ -72,8 +72,9 @@ def follow_terrain(
     band
         The heights above the surface allowed.
     aim_m
-        The height above the surface to put waypoints at, where they can be (None: the band's
-        middle).
+        The height above the surface to put waypoints at, where they can be (None: on the
+        straight line from the last one on to ``b``, so that the vehicle climbs and descends
+        only where the band makes it).
     negated
         :func:`~urpt_gcs.flight.band.negated_terrain` of ``terrain`` covering the leg (made
         here when None).
@@ -109,10 +110,9 @@ def follow_terrain(
         return np.empty((0, 3))
     length = float(np.hypot(b[0] - a[0], b[1] - a[1]))
     if length > 0.0:  # (both ends inside, one above the other: only rounding can fail it)
-        aim = band.mid_m if aim_m is None else aim_m
         for per_cell in _SAMPLES_PER_CELL:
             n = max(math.ceil(length * per_cell / terrain.cell_m), 1)
-            waypoints = _follow(terrain, negated, a, b, band, aim, n)
+            waypoints = _follow(terrain, negated, a, b, band, aim_m, n)
             if waypoints is not None:
                 return waypoints
     raise _leg_error(name, a, b, band, "climbs too steeply for the band")
@@ -124,7 +124,7 @@ def _follow(
     a: FloatArray,
     b: FloatArray,
     band: FlightBand,
-    aim_m: float,
+    aim_m: float | None,
     n: int,
 ) -> FloatArray | None:
     """:func:`follow_terrain`'s waypoints with ``n`` steps between samples; None when some
@@ -139,7 +139,7 @@ def _follow(
     inset = np.minimum(_INSET * band.width_m, _INSET_RAMP * np.minimum(dist, length - dist))
     low = surface + band.floor_m + inset
     high = surface + band.ceiling_m - inset
-    aim = surface + aim_m
+    aim = None if aim_m is None else surface + aim_m
 
     # The heights at each sample from which a straight piece reaches b with every sample
     # between in the band: slopes back from b, narrowed sample by sample towards a.
@@ -152,12 +152,17 @@ def _follow(
     def point(i: int, z: float) -> FloatArray:
         return np.array([a[0] + u[i] * (b[0] - a[0]), a[1] + u[i] * (b[1] - a[1]), z])
 
-    def pick(j: int, lo: float, hi: float) -> float:
-        room = 0.1 * (hi - lo)
-        return float(np.clip(aim[j], lo + room, hi - room))
-
     def tries(i0: int, z0: float) -> Iterator[tuple[int, float]]:
         """Where the next piece from sample ``i0`` at height ``z0`` may end, best first."""
+
+        def pick(j: int, lo: float, hi: float) -> float:
+            # Without a height to aim at, the straight line on to b: the vehicle climbs and
+            # descends only where the band makes it.
+            room = 0.1 * (hi - lo)
+            share = (dist[j] - dist[i0]) / max(length - dist[i0], 1e-9)
+            want = z0 + (b[2] - z0) * share if aim is None else aim[j]
+            return float(np.clip(want, lo + room, hi - room))
+
         # Slopes (metres per metre) from (i0, z0) that keep samples i0+1 .. e in the band.
         reach = _LOOKAHEAD
         while True:

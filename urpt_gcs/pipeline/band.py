@@ -19,7 +19,6 @@ by the band:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -28,6 +27,7 @@ from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.bound.certificate import Certificate, bound_time_s
 from urpt_gcs.bound.geometric import greedy_disjoint
 from urpt_gcs.bound.lower_bound import lower_bound
+from urpt_gcs.bound.order_bound import prepare as prepare_bound
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.band import FlightBand, band_profile
 from urpt_gcs.flight.follow import path_in_band
@@ -41,14 +41,14 @@ from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages, solve_stage
 from urpt_gcs.problem.flight_time import FlightModel, Sortie, SortieLegs, cut_sorties
 from urpt_gcs.problem.instance import Covers, Instance
-from urpt_gcs.problem.regions import RegionSet
 from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.reading import fill_along
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.band import BandViewpoints, band_levels, band_viewpoints, sees_from
+from urpt_gcs.visibility.band_outer import BandOuter, band_outer
 
-__all__ = ["MAX_BAND_VIEWPOINTS", "OuterDiscs", "outer_discs", "plan_in_band"]
+__all__ = ["MAX_BAND_VIEWPOINTS", "plan_in_band"]
 
 # Candidates the band offers the solver at most: its table of leg times is dense.
 MAX_BAND_VIEWPOINTS = 4000
@@ -57,10 +57,6 @@ MAX_BAND_VIEWPOINTS = 4000
 _NEAR_COUNT = 300
 # Heights are written in whole centimetres.
 _CM = 100.0
-# Rounds of the outer discs' fixed point (each round only shrinks them).
-_OUTER_ROUNDS = 8
-# How much wider than a disc's radius, in cells, the window searched for its highest corner.
-_WINDOW_SLACK = 1.5
 
 
 def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stages: Stages) -> Plan:
@@ -124,11 +120,15 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
     time_bound = horizontal_bound = 0.0
     if settings.certify:
         budget = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
+        stages.say("preparing the bound's search (compiled on first use)")
+        prepare_bound()
+        stages.lap("bound compile")
         stages.say(f"bounding the shortest possible flight in the band (up to {budget:.1f} s)")
         horizontal_m = math.fsum(s.length_m for s in flight.sorties)
-        certificate = _certify(site, area, band, horizontal_m, budget)
+        outer = _outer(site, area, band, tol)
+        certificate = _certify(outer, horizontal_m, budget)
         horizontal_bound = certificate.lower_bound_m
-        time_bound = _time_bound(site, area, band, model, horizontal_bound)
+        time_bound = _time_bound(site, area, band, model, outer, horizontal_bound)
         stages.lap("bound")
     band_flight = BandFlight(
         band=band,
@@ -490,90 +490,33 @@ def _check_written(
     return written, tuple(legs), lowest, highest
 
 
-@dataclass(frozen=True, slots=True)
-class OuterDiscs:
-    """Per target, a disc no viewpoint inside the band that sees it lies beyond, and the
-    lowest and highest DEM corner within it."""
-
-    radius_m: FloatArray
-    lowest_m: FloatArray
-    highest_m: FloatArray
-
-
-def outer_discs(
-    terrain: Terrain,
-    targets_xy: FloatArray,
-    ground_m: FloatArray,
-    tan_fov: float,
-    far_m: float,
-    ceiling_m: float,
-    top_m: float,
-) -> OuterDiscs:
-    """Per target, a radius no viewpoint inside the band that sees it lies beyond.
-
-    A point at horizontal distance ``d`` that sees a target ``g`` below it in the cone has
-    ``d <= (z - g) tan``, and inside the band ``z`` is at most the ceiling over the surface
-    there; so ``d <= (S(d) + ceiling - g) tan`` with ``S(d)`` the highest surface within
-    ``d``. From ``top_m`` (the highest terrain read) the radius shrinks to that fixed point,
-    each round with the highest DEM corner within the last radius (bilinear heights never
-    pass their corners), within the GSD distance.
-    """
-    z = terrain.elevation_m
-    rows, cols = z.shape
-    cols_c, rows_c = terrain.pixel_coords(targets_xy[:, 0], targets_xy[:, 1])
-    cell = terrain.cell_m
-    radius = np.maximum(top_m + ceiling_m - ground_m, 0.0) * tan_fov
-    if math.isfinite(far_m):
-        radius = np.minimum(radius, far_m)
-    lowest = np.full(len(radius), -np.inf)
-    highest = np.full(len(radius), np.inf)
-    for _ in range(_OUTER_ROUNDS):
-        for i, r in enumerate(radius):
-            # Wider than the disc: a fitted grid's cells need not be square.
-            reach = math.ceil(_WINDOW_SLACK * r / cell) + 2
-            c0, r0 = math.floor(cols_c[i]), math.floor(rows_c[i])
-            window = z[
-                max(r0 - reach, 0) : min(r0 + reach + 2, rows),
-                max(c0 - reach, 0) : min(c0 + reach + 2, cols),
-            ]
-            # Unknown ground may be anything: keep the widest answer there.
-            if np.isnan(window).any() or window.size == 0:
-                lowest[i], highest[i] = -np.inf, top_m
-            else:
-                lowest[i], highest[i] = float(np.min(window)), float(np.max(window))
-        radius = np.minimum(radius, np.maximum(highest + ceiling_m - ground_m, 0.0) * tan_fov)
-    return OuterDiscs(radius, lowest, highest)
-
-
-def _certify(
-    site: SiteInputs, area: PlanArea, band: FlightBand, horizontal_m: float, budget_s: float
-) -> Certificate:
-    """A lower bound of the horizontal length of any flight from home inside the band that
-    photographs every target: the shortest closed path from home through every target's
-    outer disc (:func:`outer_radii`), bounded by the same search as the plane's."""
-    outer = _outer(site, area, band)
-    discs = np.column_stack([site.targets_xy, outer.radius_m])
-    regions = RegionSet(discs=discs, depot_xy=site.home_xy)
-    bound = lower_bound(regions, horizontal_m, budget_s)
-    return Certificate(
-        min(bound.value, horizontal_m),
-        f"{bound.method} over outer discs in the band",
-        bound.seconds,
-        0,
-        math.nan,
-        bound.relaxed_tour_xy,
-    )
-
-
-def _outer(site: SiteInputs, area: PlanArea, band: FlightBand) -> OuterDiscs:
-    return outer_discs(
+def _outer(site: SiteInputs, area: PlanArea, band: FlightBand, hold_m: float) -> BandOuter:
+    """Every target's outer star in the band (:mod:`urpt_gcs.visibility.band_outer`)."""
+    return band_outer(
         area.terrain,
         site.targets_xy,
         area.ground_m,
-        area.camera.tan_fov,
-        area.camera.max_distance_m,
+        area.camera,
         band.ceiling_m,
         area.terrain_max_m,
+        site.home_xy,
+        hold_m,
+    )
+
+
+def _certify(outer: BandOuter, horizontal_m: float, budget_s: float) -> Certificate:
+    """A lower bound of the horizontal length of any flight from home inside the band whose
+    stops see every target from anywhere within the position tolerance: the shortest closed
+    path from home through every target's outer star, bounded by the same search as the
+    plane's."""
+    bound = lower_bound(outer.regions, horizontal_m, budget_s)
+    return Certificate(
+        min(bound.value, horizontal_m),
+        f"{bound.method} over outer stars in the band",
+        bound.seconds,
+        int(outer.regions.outer[0].reach_m.size),
+        math.nan,
+        bound.relaxed_tour_xy,
     )
 
 
@@ -582,6 +525,7 @@ def _time_bound(
     area: PlanArea,
     band: FlightBand,
     model: FlightModel,
+    outer: BandOuter,
     horizontal_m: float,
 ) -> float:
     """A lower bound of the flight time of any flight in the band that photographs every
@@ -596,7 +540,6 @@ def _time_bound(
     lowest corner) and sink to see the one whose disc sits lowest (the ceiling over its
     highest corner), and it starts and ends at home; its descents likewise.
     """
-    outer = _outer(site, area, band)
     photos = len(greedy_disjoint(site.targets_xy, float(outer.radius_m.max())))
     # Inside the band every leg is flown in AUTO at the mission's cruise speed: the way home
     # too follows the terrain through waypoints (RTL would fly straight).

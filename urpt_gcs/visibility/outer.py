@@ -30,6 +30,8 @@ __all__ = [
     "outer_regions",
     "points_along",
     "spread_targets",
+    "star_holds",
+    "star_polygon",
     "star_sectors",
 ]
 
@@ -112,9 +114,9 @@ def outer_regions(
     stars = tuple(
         OuterStar((float(x), float(y)), outer[i], inner[i]) for i, (x, y) in enumerate(xy.tolist())
     )
-    inside = None if depot_xy is None else tuple(_holds(s, depot_xy) for s in stars)
+    inside = None if depot_xy is None else tuple(star_holds(s, depot_xy) for s in stars)
     regions = RegionSet(
-        polygons=tuple(_star_polygon(s) for s in stars),
+        polygons=tuple(star_polygon(s) for s in stars),
         depot_xy=depot_xy,
         outer=stars,
         depot_inside=inside,
@@ -208,11 +210,11 @@ def finer_stars(
         inside = (
             None
             if regions.depot_xy is None
-            else tuple(_holds(s, regions.depot_xy) for s in stars_t)
+            else tuple(star_holds(s, regions.depot_xy) for s in stars_t)
         )
         return dataclasses.replace(
             regions,
-            polygons=tuple(_star_polygon(s) for s in stars_t),
+            polygons=tuple(star_polygon(s) for s in stars_t),
             outer=stars_t,
             depot_inside=inside,
         )
@@ -228,7 +230,7 @@ def _halved(star: OuterStar, wedges: FloatArray) -> OuterStar:
     return OuterStar(star.center_xy, reach, inner)
 
 
-def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:
+def star_holds(star: OuterStar, xy: tuple[float, float]) -> bool:
     """Whether the point may lie in the star: within the reach of its sector or of either
     neighbour (a point on an edge between two sectors belongs to both)."""
     dx, dy = xy[0] - star.center_xy[0], xy[1] - star.center_xy[1]
@@ -238,7 +240,7 @@ def _holds(star: OuterStar, xy: tuple[float, float]) -> bool:
     return math.hypot(dx, dy) <= reach * (1.0 + 1e-9) + 1e-9
 
 
-def _star_polygon(star: OuterStar) -> Polygon:
+def star_polygon(star: OuterStar) -> Polygon:
     """A polygon holding the star: each sector's arc replaced by the tangents' corners."""
     n = star.reach_m.size
     edges = 2.0 * math.pi * np.arange(n + 1) / n
