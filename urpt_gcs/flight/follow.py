@@ -60,8 +60,9 @@ def follow_terrain(
     interval), preferring the farthest point from which ``b`` is reached in turn, at the height
     nearest ``aim_m`` above the surface (or the straight line on to ``b``) that leaves some
     room; the piece is then checked exactly (:func:`~urpt_gcs.flight.band.inside_band`) and
-    drawn back until it passes. Samples are held a tenth of the band's width inside either limit where the given ends allow. Where
-    no piece between two samples passes, the leg is sampled again 4 and then 16 times finer.
+    drawn back until it passes. Samples are held a tenth of the band's width inside either
+    limit where the given ends allow. Where no piece between two samples passes, the leg is
+    sampled again 4 and then 16 times finer.
 
     Parameters
     ----------
