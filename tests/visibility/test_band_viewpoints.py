@@ -12,7 +12,6 @@ from affine import Affine
 
 from urpt_gcs.flight.band import FlightBand
 from urpt_gcs.flight.follow import path_in_band
-from urpt_gcs.pipeline.band import _vertical_s
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.band import band_viewpoints, sees_from
@@ -114,8 +113,7 @@ def test_leg_cost_never_exceeds_the_path_the_flight_follows() -> None:
         line = xy[0][None, :] + (xy[1] - xy[0])[None, :] * t[:, None]
         under = terrain.sample(line[:, 0], line[:, 1])
         length = np.array([float(np.hypot(*(xy[1] - xy[0])))])
-        extra = _vertical_s(
-            model,
+        extra = model.least_vertical_s(
             length,
             z[:1],
             z[1:],

@@ -184,9 +184,9 @@ def _time_instance(
     its stop; from home the take-off and to home the landing.
 
     A leg's time is the flight model's for its horizontal length and the least climbing and
-    descending that following the terrain inside the band needs there (:func:`_vertical_s`):
-    never more than the path flown will take, and exact for a straight leg that stays in
-    the band."""
+    descending that following the terrain inside the band needs there
+    (``FlightModel.least_vertical_s``): never more than the path flown will take, and exact
+    for a straight leg that stays in the band."""
     n = len(views.xyz)
     require_memory(
         6.0 * 8.0 * n * n,
@@ -211,8 +211,8 @@ def _time_instance(
     trough[k] = np.where(np.isfinite(profile.highest_m), -profile.highest_m, np.inf)
     peak += band.floor_m
     trough += band.ceiling_m
-    forth = model.leg3_s(d, 0.0, _vertical_s(model, d, xyz[i, 2], xyz[j, 2], peak, trough))
-    back = model.leg3_s(d, 0.0, _vertical_s(model, d, xyz[j, 2], xyz[i, 2], peak, trough))
+    forth = model.leg3_s(d, 0.0, model.least_vertical_s(d, xyz[i, 2], xyz[j, 2], peak, trough))
+    back = model.leg3_s(d, 0.0, model.least_vertical_s(d, xyz[j, 2], xyz[i, 2], peak, trough))
     full = np.zeros((n + 1, n + 1))
     full[i, j] = forth
     full[j, i] = back
@@ -240,33 +240,6 @@ def _near_m(points_xy: FloatArray) -> float:
     tree = cKDTree(points_xy)
     dist, _ = tree.query(points_xy, k=_NEAR_COUNT + 1)
     return float(np.max(dist[:, -1]))
-
-
-def _vertical_s(
-    model: FlightModel,
-    length_m: FloatArray,
-    start_m: FloatArray,
-    end_m: FloatArray,
-    peak_m: FloatArray,
-    trough_m: FloatArray,
-) -> FloatArray:
-    """What a leg's climbs and descents take beyond its horizontal time, at the least.
-
-    Inside the band the vehicle must rise to ``peak_m`` (the floor over the highest ground
-    under the leg) and sink to ``trough_m`` (the ceiling over the lowest), in one order or
-    the other, between its start and end heights: the cheaper order's climbs at the climb
-    rate and descents at the descent rate.
-    """
-    hi = np.maximum(np.maximum(start_m, end_m), peak_m)
-    lo = np.minimum(np.minimum(start_m, end_m), trough_m)
-    best = np.full(len(length_m), np.inf)
-    for first, second in ((hi, lo), (lo, hi)):
-        steps = (first - start_m, second - first, end_m - second)
-        up = sum(np.maximum(x, 0.0) for x in steps)
-        down = sum(np.maximum(-x, 0.0) for x in steps)
-        best = np.minimum(best, up / model.climb_m_s + down / model.descent_m_s)
-    out: FloatArray = np.maximum(best - length_m / model.cruise_m_s, 0.0)
-    return out
 
 
 class _Flight:

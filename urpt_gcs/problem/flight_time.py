@@ -234,6 +234,33 @@ class FlightModel:
         out: FloatArray = self.leg_s(d) + np.asarray(vertical_s, dtype=np.float64)
         return out
 
+    def least_vertical_s(
+        self,
+        length_m: FloatArray,
+        start_m: FloatArray,
+        end_m: FloatArray,
+        peak_m: FloatArray,
+        trough_m: FloatArray,
+    ) -> FloatArray:
+        """What a leg's climbs and descents take beyond its horizontal time, at the least.
+
+        The vehicle must rise to ``peak_m`` and sink to ``trough_m`` somewhere along the leg
+        (a flight inside a height band: the floor over the highest ground under the leg, the
+        ceiling over the lowest), in one order or the other, between its start and end
+        heights: the cheaper order's climbs at the climb rate and descents at the descent
+        rate, less what the leg's horizontal time covers.
+        """
+        hi = np.maximum(np.maximum(start_m, end_m), peak_m)
+        lo = np.minimum(np.minimum(start_m, end_m), trough_m)
+        best = np.full(np.shape(length_m), np.inf)
+        for first, second in ((hi, lo), (lo, hi)):
+            steps = (first - start_m, second - first, end_m - second)
+            up = sum(np.maximum(x, 0.0) for x in steps)
+            down = sum(np.maximum(-x, 0.0) for x in steps)
+            best = np.minimum(best, up / self.climb_m_s + down / self.descent_m_s)
+        out: FloatArray = np.maximum(best - np.asarray(length_m) / self.cruise_m_s, 0.0)
+        return out
+
     def vertical_excess_s(self, length_m: FloatArray, rise_m: FloatArray) -> float:
         """What the pieces of one path spend climbing or descending beyond their horizontal
         time: each piece takes the slower of the two."""

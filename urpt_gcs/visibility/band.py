@@ -27,7 +27,14 @@ from urpt_gcs.memory import require_memory
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import Camera, in_frame, line_of_sight
 
-__all__ = ["BandViewpoints", "band_cover_pairs", "band_levels", "band_viewpoints", "sees_from"]
+__all__ = [
+    "BandViewpoints",
+    "band_cover_pairs",
+    "band_levels",
+    "band_viewpoints",
+    "inside_band_around",
+    "sees_from",
+]
 
 # Heights above the surface a target's candidates are offered at, between the band's limits
 # less an inset (a share of the band's width, plus the tolerance): low stops climb less, high
@@ -219,7 +226,7 @@ def band_viewpoints(
     surface = terrain.sample(xy[:, 0], xy[:, 1])
     # The nadir sits on its target: the surface there is the target's own ground.
     xyz = np.column_stack([xy, surface + h])
-    keep = np.isfinite(surface) & _inside_band_around(terrain, xyz, floor_m, ceiling_m, tolerance_m)
+    keep = np.isfinite(surface) & inside_band_around(terrain, xyz, floor_m, ceiling_m, tolerance_m)
     xyz, own = xyz[keep], own[keep]
     heading = None
     if camera.frame is not None:
@@ -270,7 +277,7 @@ def _candidate_points(
     return xy, np.tile(height, m), own
 
 
-def _inside_band_around(
+def inside_band_around(
     terrain: Terrain, xyz: FloatArray, floor_m: float, ceiling_m: float, tolerance_m: float
 ) -> BoolArray:
     """Whether each point, moved anywhere up to ``tolerance_m`` (sampled on its rim), stays
