@@ -30,6 +30,7 @@ from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.bound.order_bound import prepare as prepare_bound
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.band import FlightBand, band_profile
+from urpt_gcs.flight.band_refine import BandStops, refine_band_stops
 from urpt_gcs.flight.follow import path_in_band
 from urpt_gcs.flight.mission import GeoPoint, Mission, build_mission
 from urpt_gcs.flight.safety import Leg, geofence_polygon
@@ -116,6 +117,30 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
     stages.say("following the terrain between the stops")
     flight = _fly(site, area, band, model, settings, stops, home_xyz, takeoff_m, tour, headings)
     stages.lap("sorties")
+    unrefined_s = sum(x.flight_time_s for x in flight.sorties)
+    if settings.refine:
+        stages.say("moving the stops in three dimensions")
+        keep = BandStops(
+            area.terrain,
+            area.camera,
+            band,
+            site.targets_xy,
+            area.ground_m,
+            tour.sees,
+            headings,
+            tol,
+        )
+        moved = refine_band_stops(keep, stops, home_xyz, model)
+        if not np.array_equal(moved, stops):
+            try:
+                other = _fly(
+                    site, area, band, model, settings, moved, home_xyz, takeoff_m, tour, headings
+                )
+            except PlanError:
+                other = None  # (a moved stop the written mission no longer holds: keep them)
+            if other is not None and sum(x.flight_time_s for x in other.sorties) < unrefined_s:
+                flight, stops = other, moved
+        stages.lap("refine")
     certificate = None
     time_bound = horizontal_bound = 0.0
     if settings.certify:
@@ -140,6 +165,7 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
         time_bound_s=time_bound,
         horizontal_bound_m=horizontal_bound,
         estimate_s=float(tour.length),
+        unrefined_s=unrefined_s,
     )
     return Plan(
         settings=settings,

@@ -71,7 +71,10 @@ class BandFlight:
     horizontal_bound_m
         A lower bound of the horizontal length of any such flight.
     estimate_s
-        The flight time the solver's straight-leg estimate gave the flown order.
+        The flight time the solver's table gave its tour (its stops before they moved).
+    unrefined_s
+        The flight time with the solver's stops where it put them; the flight is that or,
+        with its stops moved in three dimensions, shorter.
     """
 
     band: FlightBand
@@ -83,6 +86,7 @@ class BandFlight:
     time_bound_s: float
     horizontal_bound_m: float
     estimate_s: float
+    unrefined_s: float
 
     @property
     def inserted(self) -> int:
