@@ -21,10 +21,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from band_sites import write_targets  # noqa: E402
+from band_sites import write_targets
 
-from urpt_gcs import PlanSettings, plan  # noqa: E402
-from urpt_gcs.errors import UrptError  # noqa: E402
+from urpt_gcs import PlanSettings, plan
+from urpt_gcs.errors import UrptError
 
 SITES = {"ecuador": "rbsf_ecuador_elev10m.tif", "arenal": "arenal_aster_wgs84.tif"}
 
