@@ -2,7 +2,9 @@
 and back, in its own colour, stops numbered in flight order), home, scale bar and north arrow.
 
 Drawn with matplotlib's object API (no pyplot, no global state) in the planning CRS, so
-distances on the picture are metres on the ground.
+distances on the picture are metres on the ground. A plan inside a height band has no
+regions; its stops are coloured by their height above the surface and a profile per sortie
+is drawn below the map (:mod:`urpt_gcs.files.bandview`).
 """
 
 from __future__ import annotations
@@ -22,8 +24,16 @@ from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.transforms import Affine2D
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.files.band_report import eye_heights_m
+from urpt_gcs.files.bandview import (
+    PROFILE_ROW_IN,
+    draw_band_stops,
+    draw_profiles,
+    profile_grid,
+    title_lines,
+)
 from urpt_gcs.files.report import flight_quality, flown_stops, sortie_colour
-from urpt_gcs.flight.mission import waypoint_positions
+from urpt_gcs.flight.mission import photo_positions, waypoint_positions
 from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.site.dem import WGS84
 from urpt_gcs.site.terrain import Terrain
@@ -56,7 +66,8 @@ def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
 
 
 def sortie_routes(plan: Plan, to_map: pyproj.Transformer) -> list[FloatArray]:
-    """Each sortie as flown, in the planning CRS: home, its missions' waypoints, home."""
+    """Each sortie as flown, in the planning CRS: home, its missions' waypoints (with a photo
+    or without), home."""
     routes = []
     for mission in plan.missions:
         home = (mission.home.lat_deg, mission.home.lon_deg)
@@ -71,6 +82,7 @@ def _draw_sorties(ax: Any, plan: Plan, to_map: pyproj.Transformer) -> list[Float
     routes = sortie_routes(plan, to_map)
     stops = flown_stops(plan)
     many = len(routes) > 1
+    numbered = plan.band_flight is None  # a band's stops are drawn by their height
     for number, (route, sortie) in enumerate(zip(routes, plan.sorties, strict=True), start=1):
         colour = sortie_colour(number)
         label = (
@@ -90,7 +102,10 @@ def _draw_sorties(ax: Any, plan: Plan, to_map: pyproj.Transformer) -> list[Float
             label=label,
             gid=f"sortie {number}",
         )
-        for stop, (x, y) in zip((s for s in stops if s.sortie == number), route[1:-1], strict=True):
+        lat, lon = np.array(photo_positions(plan.missions[number - 1])).T
+        at = np.column_stack(to_map.transform(lon, lat))
+        mine = (s for s in stops if s.sortie == number)
+        for stop, (x, y) in zip(mine, at if numbered else [], strict=numbered):
             ax.annotate(
                 str(stop.order),
                 (x, y),
@@ -113,10 +128,11 @@ def frame_footprints(plan: Plan) -> list[FloatArray]:
         return []
     out = []
     corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    eyes = eye_heights_m(plan)
     for k, (x, y) in enumerate(tour.points_xy):
         seen = np.flatnonzero(tour.sees[k])
         ground = float(plan.ground_m[seen].mean()) if seen.size else float(plan.ground_m.min())
-        h = plan.camera.altitude_m - ground
+        h = float(eyes[k]) - ground
         across, along = (
             corners[:, 0] * h * frame.half_tan_across,
             corners[:, 1] * h * frame.half_tan_along,
@@ -154,16 +170,20 @@ def _camera_words(data: dict[str, Any]) -> str:
     return f"frame {w:g}x{h:g} mm / {camera['focal_mm']:g} mm{gsd}"
 
 
-def _terrain_figure(terrain: Terrain) -> tuple[Figure, Any]:
-    """A figure with the DSM drawn hillshaded and tinted, in the planning CRS."""
+def _terrain_figure(terrain: Terrain, profiles: int = 0) -> tuple[Figure, Any, list[Any]]:
+    """A figure with the DSM drawn hillshaded and tinted, in the planning CRS, and below it
+    ``profiles`` empty panels (see :func:`~urpt_gcs.files.bandview.profile_grid`)."""
     step = max(1, math.ceil(max(terrain.elevation_m.shape) / _MAX_DISPLAY_PX))
     z = np.asarray(terrain.elevation_m[::step, ::step], dtype=np.float64)
     t = terrain.transform
     pixel_to_map = Affine2D.from_values(t.a * step, t.d * step, t.b * step, t.e * step, t.c, t.f)
 
-    fig = Figure(figsize=(11, 10), dpi=110)
+    rows, cols = profile_grid(profiles) if profiles else (0, 1)
+    fig = Figure(figsize=(11, 10 + PROFILE_ROW_IN * rows), dpi=110)
     FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
+    grid = fig.add_gridspec(1 + rows, cols, height_ratios=[10.0] + [PROFILE_ROW_IN] * rows)
+    ax = fig.add_subplot(grid[0, :])
+    panels = [fig.add_subplot(grid[1 + k // cols, k % cols]) for k in range(profiles)]
     ax.set_aspect("equal")
     ax.set_facecolor("#eeeeee")
 
@@ -183,15 +203,17 @@ def _terrain_figure(terrain: Terrain) -> tuple[Figure, Any]:
     hole.set_transform(pixel_to_map + ax.transData)
     bar = fig.colorbar(tint, ax=ax, shrink=0.6, pad=0.01)
     bar.set_label("elevation (m, DEM datum); red: no data")
-    return fig, ax
+    return fig, ax, panels
 
 
 def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     """The map as a matplotlib figure; each sortie's route is the line with gid
     ``sortie N``."""
-    fig, ax = _terrain_figure(plan.terrain)
-    palette = [f"C{k % 10}" for k in range(len(plan.regions))]
-    for region, colour in zip(plan.regions, palette, strict=True):
+    band = plan.band_flight
+    fig, ax, panels = _terrain_figure(plan.terrain, 0 if band is None else len(plan.missions))
+    # A colour per target and its region; a band plan has no regions.
+    palette = [f"C{k % 10}" for k in range(len(plan.regions) or len(plan.targets_xy))]
+    for region, colour in zip(plan.regions, palette if plan.regions else [], strict=True):
         if region.polygon.is_empty:
             continue
         ring = np.asarray(region.polygon.exterior.coords)
@@ -219,6 +241,8 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     hx, hy = plan.home_xy
     to_map = pyproj.Transformer.from_crs(WGS84, plan.crs, always_xy=True)
     paths = _draw_sorties(ax, plan, to_map)
+    if band is not None:
+        draw_band_stops(fig, ax, plan)
     _draw_frames(ax, plan)
     ax.scatter(
         [hx], [hy], marker="*", s=260, c="white", edgecolors="black", zorder=11, label="home"
@@ -258,11 +282,18 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
         f"{data['targets']} targets, {data['tour_stops']} stops, "
         f"{'flown' if count > 1 else 'tour'} {data['tour_length_m']:.0f} m"
         f" ({quality}), {data['flight_time_s'] / 60:.1f} min{sorties}\n"
-        f"altitude {data['altitude_amsl_m']:.1f} m AMSL / {data['altitude_above_home_m']:.1f} m "
-        f"above home, {_camera_words(data)}, solver {data['solver']}",
+        + (
+            title_lines(data)
+            if band is not None
+            else f"altitude {data['altitude_amsl_m']:.1f} m AMSL / "
+            f"{data['altitude_above_home_m']:.1f} m above home"
+        )
+        + f", {_camera_words(data)}, solver {data['solver']}",
         fontsize=10,
     )
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
+    if band is not None:
+        draw_profiles(panels, plan)
     fig.tight_layout()
     _draw_altitude_curve(fig, data)
     return fig
@@ -358,7 +389,7 @@ def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
     """The fleet map as a matplotlib figure; vehicle k's routes are the lines with gid
     ``vehicle k sortie N``."""
     widest = max(plans, key=lambda p: p.terrain.elevation_m.size)
-    fig, ax = _terrain_figure(widest.terrain)
+    fig, ax, _ = _terrain_figure(widest.terrain)
     to_map = pyproj.Transformer.from_crs(WGS84, widest.crs, always_xy=True)
     drawn = []
     for number, plan in enumerate(plans, start=1):

@@ -7,10 +7,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from urpt_gcs.bound.certificate import PROVEN_GAP
-from urpt_gcs.flight.mission import Mission, photo_headings
+from urpt_gcs.files.band_report import (
+    band_lines,
+    band_stop_lines,
+    band_stops,
+    band_summary,
+    eye_heights_m,
+)
+from urpt_gcs.flight.mission import photo_headings, photo_positions
 from urpt_gcs.pipeline.result import Plan
 
 
@@ -53,15 +59,31 @@ class FlownStop:
 def flown_stops(plan: Plan) -> list[FlownStop]:
     """Every stop of every sortie with what it sees and when the copter gets there.
 
-    Positions are the missions' NAV_WAYPOINT items, so whatever draws them draws what is
-    flown; ``eta_s`` is from arming, on the plan's
-    :class:`~urpt_gcs.problem.flight_time.FlightModel`.
+    Positions are the missions' NAV_WAYPOINT items that take a photo, so whatever draws them
+    draws what is flown; ``eta_s`` is from arming, on the plan's
+    :class:`~urpt_gcs.problem.flight_time.FlightModel`. In a band plan ``from_previous_m``
+    is the horizontal length of the path from the stop before, through the waypoints that
+    follow the terrain, and the ETA flies that path
+    (:func:`~urpt_gcs.files.band_report.band_stops`).
     """
     tour = plan.tour
     assert tour.points_xy is not None
     names = [t.name for t in plan.targets.targets]
     model = plan.flight_model
-    waypoints = [latlon for m in plan.missions for latlon in _waypoint_items(m)]
+    waypoints = [latlon for m in plan.missions for latlon in photo_positions(m)]
+    if plan.band_flight is not None:
+        return [
+            FlownStop(
+                order=b.order,
+                sortie=b.sortie,
+                lat_deg=waypoints[b.order - 1][0],
+                lon_deg=waypoints[b.order - 1][1],
+                sees=tuple(names[t] for t in np.flatnonzero(tour.sees[b.order - 1]).tolist()),
+                from_previous_m=b.from_previous_m,
+                eta_s=b.eta_s,
+            )
+            for b in band_stops(plan)
+        ]
     stops = []
     for number, sortie in enumerate(plan.sorties, start=1):
         previous = np.asarray(plan.home_xy)
@@ -103,6 +125,12 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         }
         for stop in flown_stops(plan)
     ]
+    band = plan.band_flight is not None
+    if band:
+        for entry, b in zip(stops, band_stops(plan), strict=True):
+            entry["height_amsl_m"] = b.amsl_m
+            entry["height_above_home_m"] = b.above_home_m
+            entry["height_above_surface_m"] = _round(b.above_surface_m)
     sorties = [
         {
             "sortie": n,
@@ -130,7 +158,10 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "optimal_over_candidates": plan.optimal_over_candidates,
         **_refinement(plan),
         "bound": _bound(plan),
-        "solver_tour_length_m": round(
+        # In a band the solver's tour is costed in seconds (see band.estimate_s).
+        "solver_tour_length_m": None
+        if band
+        else round(
             tour.length if plan.sortie_order is None else plan.sortie_order.tour_length_m, 3
         ),
         "solver_proven_optimal": tour.proven_optimal,
@@ -138,8 +169,9 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "solver": tour.solver,
         "solve_s": round(tour.solve_s, 3),
         "flight_time_s": round(plan.flight_time_s, 1),
-        "altitude_amsl_m": round(plan.camera.altitude_m, 2),
-        "altitude_above_home_m": round(plan.altitude_rel_m, 2),
+        # No plane in a band: each stop has its own height (band, stops).
+        "altitude_amsl_m": None if band else round(plan.camera.altitude_m, 2),
+        "altitude_above_home_m": None if band else round(plan.altitude_rel_m, 2),
         "terrain_max_m": round(plan.terrain_max_m, 2),
         "fov_deg": plan.camera.fov_deg,
         "samples": plan.settings.samples,
@@ -179,6 +211,7 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "files": files or [],
         **_frame_camera(plan),
         **_altitude_curve(plan),
+        **({"band": band_summary(plan)} if band else {}),
     }
 
 
@@ -193,7 +226,9 @@ def _refinement(plan: Plan) -> dict[str, Any]:
     """The solver's tour before and after its stops were moved within their regions."""
     done = plan.refinement
     if done is None:
-        return {"discrete_length_m": round(plan.tour.length, 3), "refined_length_m": None}
+        # A band's tour is costed in seconds, not metres.
+        discrete = None if plan.band_flight is not None else round(plan.tour.length, 3)
+        return {"discrete_length_m": discrete, "refined_length_m": None}
     return {
         "discrete_length_m": round(done.before_m, 3),
         "refined_length_m": round(done.after_m, 3),
@@ -250,10 +285,11 @@ def _frame_camera(plan: Plan) -> dict[str, Any]:
     assert tour.points_xy is not None
     names = [t.name for t in plan.targets.targets]
     reached = {}
+    eyes = eye_heights_m(plan)
     for t, name in enumerate(names):
         stops = np.flatnonzero(tour.sees[:, t])
         horizontal = np.hypot(*(tour.points_xy[stops] - plan.targets_xy[t]).T)
-        slant = np.hypot(horizontal, camera.altitude_m - plan.ground_m[t])
+        slant = np.hypot(horizontal, eyes[stops] - plan.ground_m[t])
         reached[name] = round(float(frame.gsd_cm(slant.min())), 3)
     worst = max(reached, key=lambda n: reached[n])
     headings = [h for m in plan.missions for h in (photo_headings(m) or [])]
@@ -311,20 +347,14 @@ def _sortie_order(plan: Plan) -> dict[str, Any] | None:
     }
 
 
-def _waypoint_items(mission: Mission) -> list[tuple[float, float]]:
-    return [
-        (item.params[4], item.params[5])
-        for item in mission.items
-        if item.command == mavlink.MAV_CMD_NAV_WAYPOINT
-    ]
-
-
 def _minutes(seconds: float) -> str:
     m, s = divmod(round(seconds), 60)
     return f"{m} min {s:02d} s"
 
 
 def _refine_line(data: dict[str, Any]) -> str:
+    if data.get("discrete_length_m") is None:
+        return "refinement     none in a band: each stop keeps its height"
     if data.get("refined_length_m") is None:
         return f"refinement     off; the solver's tour is {data['discrete_length_m']:.1f} m"
     return (
@@ -364,8 +394,10 @@ def flight_quality(data: dict[str, Any], short: bool = False) -> str:
         return f"within {_percent(data['gap_pct'])} % of the shortest possible"
     holding = (data.get("bound") or {}).get("holding_m") or 0.0
     over = f" with stops that hold {holding:g} m" if holding > 0.0 else ""
+    # In a band the length and its bound are horizontal (the bound of the time is apart).
+    what = "horizontal path in the band" if data.get("band") else "flight"
     return (
-        f"within {_percent(data['gap_pct'])} % of the shortest possible flight{over} "
+        f"within {_percent(data['gap_pct'])} % of the shortest possible {what}{over} "
         f"(certified lower bound {data['lower_bound_m']:.1f} m)"
     )
 
@@ -375,6 +407,17 @@ def _percent(pct: float) -> str:
     digits = 1 if pct >= 1.0 else 2 if pct >= 0.1 else 3
     scale = 10.0**digits
     return f"{math.ceil(pct * scale - 1e-9) / scale:.{digits}f}"
+
+
+def _stop_lines(stops: list[dict[str, Any]]) -> list[str]:
+    lines = ["stops          #  sortie  from prev   ETA      sees"]
+    for stop in stops:
+        lines.append(
+            f"               {stop['order']:<3d}{stop['sortie']:^7d}"
+            f"{stop['from_previous_m']:8.1f} m"
+            f"  {_minutes(stop['eta_s']):>9s}  {', '.join(stop['sees'])}"
+        )
+    return lines
 
 
 def summary_text(data: dict[str, Any]) -> str:
@@ -387,7 +430,7 @@ def summary_text(data: dict[str, Any]) -> str:
         + ")",
         f"viewpoints     {data['viewpoints']} candidates, {data['tour_stops']} in the tour",
         f"{'flown' if len(data['sorties']) > 1 else 'tour':<15s}"
-        f"{data['tour_length_m']:.1f} m, {quality}",
+        f"{data['tour_length_m']:.1f} m{' horizontally' if 'band' in data else ''}, {quality}",
         f"solver         {data['solver']} in {data['solve_s']:.2f} s"
         + (
             f", optimal over the {data['viewpoints']} candidate viewpoints"
@@ -397,15 +440,26 @@ def summary_text(data: dict[str, Any]) -> str:
         _refine_line(data),
         f"flight time    {_minutes(data['flight_time_s'])} (estimated at "
         f"{data['cruise_speed_m_s']:g} m/s, {data['hold_s']:g} s hold per photo)",
-        f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, "
-        f"{data['altitude_above_home_m']:.1f} m"
-        f" above home; highest terrain {data['terrain_max_m']:.1f} m",
+    ]
+    band = data.get("band")
+    if band is None:
+        lines.append(
+            f"altitude       {data['altitude_amsl_m']:.1f} m AMSL, "
+            f"{data['altitude_above_home_m']:.1f} m"
+            f" above home; highest terrain {data['terrain_max_m']:.1f} m"
+        )
+    else:
+        lines += band_lines(data)
+    lines += [
         _camera_line(data),
         f"home           {home['lat_deg']:.7f}, {home['lon_deg']:.7f} ({home['source']})",
         _dem_line(data["dem"]),
-        f"clearance      at least {data['min_leg_clearance_m']} m over terrain on every leg",
-        f"firmware       {data['firmware']}",
     ]
+    if band is None:
+        lines.append(
+            f"clearance      at least {data['min_leg_clearance_m']} m over terrain on every leg"
+        )
+    lines.append(f"firmware       {data['firmware']}")
     if len(data["sorties"]) > 1:
         lines.append(
             f"sorties        {len(data['sorties'])} (battery --endurance "
@@ -443,14 +497,8 @@ def summary_text(data: dict[str, Any]) -> str:
                 f"{point['tour_length_m']:7.1f} m  flight {_minutes(point['flight_time_s'])}"
                 f"  ({point['wall_s']:.1f} s){mark}"
             )
-    lines.append("stops          #  sortie  from prev   ETA      sees")
     shown = data["stops"][:25]
-    for stop in shown:
-        lines.append(
-            f"               {stop['order']:<3d}{stop['sortie']:^7d}"
-            f"{stop['from_previous_m']:8.1f} m"
-            f"  {_minutes(stop['eta_s']):>9s}  {', '.join(stop['sees'])}"
-        )
+    lines += _stop_lines(shown) if band is None else band_stop_lines(shown, len(shown))
     if len(data["stops"]) > len(shown):
         lines.append(f"               ... {len(data['stops']) - len(shown)} more in summary.json")
     lines += [f"warning        {w}" for w in data["warnings"]]

@@ -6,7 +6,14 @@ plane's altitude (in the DEM's vertical datum, which Google Earth takes as heigh
 sea level), and its stops with their order numbers, what each sees and when the copter gets
 there. Routes and stops are the missions' written waypoints
 (:func:`urpt_gcs.files.report.flown_stops`), so they are what the vehicle flies.
-Coordinates are WGS84 longitude/latitude.
+Coordinates are WGS84 longitude/latitude and altitude: routes and stops at their absolute
+altitude (KML ``absolute``, GeoJSON's third coordinate), so they stand in 3-D.
+
+A plan inside a height band (``--agl``) has no plane and no regions: each route runs over
+home at the take-off height, through every waypoint of its mission (the stops and the
+waypoints without a photo that follow the terrain) at its own altitude, and back over home;
+its stops carry ``height_amsl_m``, ``height_above_home_m`` and ``height_above_surface_m``
+too, and its sorties ``waypoints`` (how many points the route has).
 
 Every GeoJSON feature has a ``kind`` property (``region``, ``target``, ``home``, ``stop``,
 ``sortie``); stops carry ``order``, ``sortie``, ``sees`` (target names) and ``eta_s`` (from
@@ -25,13 +32,17 @@ from typing import Any
 
 import numpy as np
 import pyproj
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from urpt_gcs.arrays import FloatArray
+from urpt_gcs.arrays import FloatArray, IntArray
+from urpt_gcs.files.band_report import band_stops
 from urpt_gcs.files.report import flown_stops, sortie_colour
+from urpt_gcs.flight.mission import Mission
 from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.site.dem import WGS84
 
 KML_NS = "http://www.opengis.net/kml/2.2"
+_NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 # Google Earth's stock icons, so the file needs nothing beside it.
 _ICONS = {
     "target": "http://maps.google.com/mapfiles/kml/shapes/triangle.png",
@@ -62,7 +73,8 @@ def _features(plan: Plan) -> list[_Feature]:
     altitude = plan.camera.altitude_m
     names = [t.name for t in plan.targets.targets]
     out = []
-    for region, name in zip(plan.regions, names, strict=True):
+    # A band plan has no regions (no plane to draw them on).
+    for region, name in zip(plan.regions, names if plan.regions else [], strict=True):
         if region.polygon.is_empty:
             continue
         ring = lonlat(np.asarray(region.polygon.exterior.coords))
@@ -95,45 +107,92 @@ def _features(plan: Plan) -> list[_Feature]:
         )
     )
     stops = flown_stops(plan)
+    band = plan.band_flight
+    heights = band_stops(plan) if band is not None else None
     for number, (sortie, mission) in enumerate(zip(plan.sorties, plan.missions, strict=True), 1):
         mine = [s for s in stops if s.sortie == number]
-        start = (mission.home.lon_deg, mission.home.lat_deg, altitude)
-        route = [start, *((s.lon_deg, s.lat_deg, altitude) for s in mine), start]
+        properties: dict[str, Any] = {
+            "sortie": number,
+            "stops": len(mine),
+            "length_m": round(sortie.length_m, 2),
+            "flight_time_s": round(sortie.flight_time_s, 1),
+            "colour": sortie_colour(number),
+        }
+        if band is None:
+            start = (mission.home.lon_deg, mission.home.lat_deg, altitude)
+            route = [start, *((s.lon_deg, s.lat_deg, altitude) for s in mine), start]
+            words = f"{sortie.length_m:.1f} m at {altitude:.1f} m"
+            stop_alt = [altitude] * len(mine)
+        else:
+            route = _band_route(mission)
+            properties["waypoints"] = len(route)
+            inserted = len(route) - 2 - len(mine)
+            words = (
+                f"{sortie.length_m:.1f} m horizontally in the band {band.band.describe()} "
+                f"above the surface, {inserted} waypoints without a photo"
+            )
+            stop_alt = [route[i][2] for i in _photo_points(band.path_stop[number - 1])]
         out.append(
             _Feature(
                 f"sortie {number}",
                 "sortie",
-                f"{len(mine)} stops, {sortie.length_m:.1f} m at {altitude:.1f} m, "
+                f"{len(mine)} stops, {words}, "
                 f"{sortie.flight_time_s / 60:.1f} min from home and back",
                 route,
                 sortie=number,
-                properties={
-                    "sortie": number,
-                    "stops": len(mine),
-                    "length_m": round(sortie.length_m, 2),
-                    "flight_time_s": round(sortie.flight_time_s, 1),
-                    "colour": sortie_colour(number),
-                },
+                properties=properties,
             )
         )
-        for stop in mine:
+        for stop, alt in zip(mine, stop_alt, strict=True):
+            extra: dict[str, Any] = {}
+            where = ""
+            if heights is not None:
+                b = heights[stop.order - 1]
+                surface = b.above_surface_m if np.isfinite(b.above_surface_m) else None
+                extra = {
+                    "height_amsl_m": b.amsl_m,
+                    "height_above_home_m": b.above_home_m,
+                    "height_above_surface_m": surface,
+                }
+                where = f", {b.amsl_m:.1f} m AMSL" + (
+                    "" if surface is None else f", {surface:.1f} m above the surface"
+                )
             out.append(
                 _Feature(
                     str(stop.order),
                     "stop",
                     f"sortie {number}, stop {stop.order}: photo of {', '.join(stop.sees)} "
-                    f"at {stop.eta_s:.0f} s",
-                    [(stop.lon_deg, stop.lat_deg, altitude)],
+                    f"at {stop.eta_s:.0f} s{where}",
+                    [(stop.lon_deg, stop.lat_deg, alt)],
                     sortie=number,
                     properties={
                         "order": stop.order,
                         "sortie": number,
                         "sees": list(stop.sees),
                         "eta_s": stop.eta_s,
+                        **extra,
                     },
                 )
             )
     return out
+
+
+def _band_route(mission: Mission) -> list[tuple[float, float, float]]:
+    """A band sortie as its mission flies it: over home at the take-off height, then every
+    NAV_WAYPOINT at home's altitude plus its own height above home."""
+    home = mission.home
+    route = [(home.lon_deg, home.lat_deg, round(home.amsl_m + mission.altitude_rel_m, 2))]
+    route += [
+        (item.params[5], item.params[4], round(home.amsl_m + item.params[6], 2))
+        for item in mission.items
+        if item.command == _NAV_WAYPOINT
+    ]
+    return route
+
+
+def _photo_points(path_stop: IntArray) -> list[int]:
+    """The indices along a band path of its stops."""
+    return [int(i) for i in np.flatnonzero(path_stop >= 0)]
 
 
 def _coords(points: list[tuple[float, float, float]]) -> str:
@@ -242,7 +301,8 @@ def _kml(features: list[_Feature], groups: int, group_word: str) -> str:
             ET.SubElement(folders[key], f"{q}name").text = name
         return folders[key]
 
-    folder("region", "Visibility regions")
+    if any(f.kind == "region" for f in features):
+        folder("region", "Visibility regions")
     folder("target", "Targets")
     folder("home", "Home")
     for f in features:
