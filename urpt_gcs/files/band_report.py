@@ -190,7 +190,8 @@ def band_summary(plan: Plan) -> dict[str, Any]:
         ``time_bound_s`` (a lower bound of the flight time of any flight in the band that
         photographs every target), ``time_gap_pct`` (the flight time over it, rounded up;
         None without a bound), ``horizontal_bound_m`` and ``estimate_s`` (the solver's
-        straight-leg estimate of the flown order).
+        table's time for its own tour), ``unrefined_flight_time_s`` (the flight with the solver's
+        stops where it put them, before they moved in three dimensions).
     """
     flight = _flight(plan)
     bound = flight.time_bound_s
@@ -210,6 +211,7 @@ def band_summary(plan: Plan) -> dict[str, Any]:
             math.floor(flight.horizontal_bound_m * 1000.0) / 1000.0 if bound > 0.0 else None
         ),
         "estimate_s": round(flight.estimate_s, 1),
+        "unrefined_flight_time_s": round(flight.unrefined_s, 1),
     }
 
 
@@ -237,7 +239,10 @@ def band_lines(data: dict[str, Any]) -> list[str]:
             f"every target is shorter); the flight time is {band['time_gap_pct']:.1f} % over "
             f"it; horizontal bound {band['horizontal_bound_m']:.1f} m"
         )
-    lines.append(f"estimate       {_minutes(band['estimate_s'])} (the solver's straight legs)")
+    lines.append(
+        f"estimate       {_minutes(band['estimate_s'])} (the solver's table for its tour: "
+        "the least climbing each leg needs)"
+    )
     return lines
 
 

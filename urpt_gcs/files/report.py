@@ -353,8 +353,15 @@ def _minutes(seconds: float) -> str:
 
 
 def _refine_line(data: dict[str, Any]) -> str:
-    if data.get("discrete_length_m") is None:
-        return "refinement     none in a band: each stop keeps its height"
+    band = data.get("band")
+    if band is not None:
+        before, after = band["unrefined_flight_time_s"], data["flight_time_s"]
+        if after >= before:
+            return "refinement     stops where the solver put them (moving them flew no faster)"
+        return (
+            f"refinement     stops moved in three dimensions: {_minutes(before)} -> "
+            f"{_minutes(after)} of flight"
+        )
     if data.get("refined_length_m") is None:
         return f"refinement     off; the solver's tour is {data['discrete_length_m']:.1f} m"
     return (
