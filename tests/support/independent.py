@@ -4,6 +4,11 @@ It shares no code with ``urpt_gcs``: it reads the raster itself with rasterio, i
 own CRS (no warping), interpolates with scipy's ``map_coordinates`` and measures ground
 distances on the WGS84 ellipsoid with pyproj's ``Geod``. The mission comes from the written
 ``.waypoints`` file, read with pymavlink's loader.
+
+Each NAV_WAYPOINT flies at its own height above home (line 0's AMSL plus its relative z), so
+a mission that follows the terrain inside a height band reads as one on a flight plane does;
+only the waypoints a photo item (DO_DIGICAM_CONTROL or IMAGE_START_CAPTURE) follows take a
+photo. :func:`band_excursions` samples every written leg against the surface for the band.
 """
 
 from __future__ import annotations
@@ -19,7 +24,27 @@ import rasterio
 from pymavlink import mavutil, mavwp
 from scipy.ndimage import map_coordinates
 
+__all__ = [
+    "GEOD",
+    "BandExcursions",
+    "FlownMission",
+    "FrameCamera",
+    "Raster",
+    "band_excursions",
+    "check_mission",
+    "leg_clearances",
+    "load_raster",
+    "read_waypoints_file",
+    "sees",
+    "sees_in_frame",
+]
+
 GEOD = pyproj.Geod(ellps="WGS84")
+# The items that take a photo at the NAV_WAYPOINT before them.
+PHOTO_COMMANDS = (
+    mavutil.mavlink.MAV_CMD_DO_DIGICAM_CONTROL,
+    mavutil.mavlink.MAV_CMD_IMAGE_START_CAPTURE,
+)
 
 
 @dataclass
@@ -56,9 +81,44 @@ def load_raster(path: Path) -> Raster:
 @dataclass
 class FlownMission:
     home: tuple[float, float, float]  # lat, lon, AMSL
-    waypoints: list[tuple[float, float, float]]  # lat, lon, AMSL
+    waypoints: list[tuple[float, float, float]]  # every NAV_WAYPOINT: lat, lon, AMSL
     # The heading each waypoint's photo is taken at (true, degrees; None: not commanded).
     headings: list[float | None] | None = None
+    # Per waypoint, whether a photo item follows it (None: every waypoint takes one).
+    photos: list[bool] | None = None
+    # The take-off's height above home (None: the first waypoint's).
+    takeoff_rel_m: float | None = None
+
+    @property
+    def photo_waypoints(self) -> list[tuple[float, float, float]]:
+        """The waypoints a photo is taken at, in flight order."""
+        flags = self.photos or [True] * len(self.waypoints)
+        return [w for w, f in zip(self.waypoints, flags, strict=True) if f]
+
+    @property
+    def photo_headings(self) -> list[float | None]:
+        """The heading of each photo waypoint's photo (None: not commanded)."""
+        flags = self.photos or [True] * len(self.waypoints)
+        headings = self.headings or [None] * len(self.waypoints)
+        return [h for h, f in zip(headings, flags, strict=True) if f]
+
+    @property
+    def takeoff_amsl_m(self) -> float:
+        """The height the vehicle climbs to over home before the first leg (AMSL)."""
+        if self.takeoff_rel_m is not None:
+            return self.home[2] + self.takeoff_rel_m
+        return self.waypoints[0][2]
+
+    def path(self) -> list[tuple[float, float, float]]:
+        """Every point flown through: over home at the take-off height, every waypoint, and
+        back over home (at the take-off height, unless the last waypoint is over home)."""
+        over_home = (self.home[0], self.home[1], self.takeoff_amsl_m)
+        points = [over_home, *self.waypoints]
+        last = self.waypoints[-1] if self.waypoints else over_home
+        _, _, back = GEOD.inv(last[1], last[0], self.home[1], self.home[0])
+        if back > 0.01:
+            points.append(over_home)
+        return points
 
 
 @dataclass
@@ -81,18 +141,30 @@ def read_waypoints_file(path: Path) -> FlownMission:
     assert home.frame == mavutil.mavlink.MAV_FRAME_GLOBAL
     wps = []
     headings: list[float | None] = []
+    photos: list[bool] = []
+    takeoff: float | None = None
     pending: float | None = None
     for w in items[1:]:
         if w.command == mavutil.mavlink.MAV_CMD_CONDITION_YAW and w.param4 == 0:
             pending = float(w.param1)
-        if (
-            w.command == mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
-            and w.frame == mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
-        ):
+        if w.command == mavutil.mavlink.MAV_CMD_NAV_TAKEOFF and takeoff is None:
+            assert w.frame == mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+            takeoff = float(w.z)
+        if w.command == mavutil.mavlink.MAV_CMD_NAV_WAYPOINT:
+            assert w.frame == mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, w.frame
             wps.append((w.x, w.y, home.z + w.z))
             headings.append(pending)
+            photos.append(False)
             pending = None
-    return FlownMission(home=(home.x, home.y, home.z), waypoints=wps, headings=headings)
+        if w.command in PHOTO_COMMANDS and photos:
+            photos[-1] = True
+    return FlownMission(
+        home=(home.x, home.y, home.z),
+        waypoints=wps,
+        headings=headings,
+        photos=photos,
+        takeoff_rel_m=takeoff,
+    )
 
 
 def sees_in_frame(
@@ -184,9 +256,12 @@ def check_mission(
     files = waypoints_file if isinstance(waypoints_file, list) else [waypoints_file]
     sorties = [read_waypoints_file(f) for f in files]
     assert sorties, "no mission file"
-    eyes = [w for flown in sorties for w in flown.waypoints]
-    headings = [h for flown in sorties for h in (flown.headings or [None] * len(flown.waypoints))]
+    # Only the waypoints that take a photo, each at its own altitude.
+    eyes = [w for flown in sorties for w in flown.photo_waypoints]
+    headings = [h for flown in sorties for h in flown.photo_headings]
     problems = []
+    if not eyes:
+        problems.append("no waypoint takes a photo")
     if frame is not None and None in headings:
         problems.append("a frame camera's mission leaves some photo's heading to the vehicle")
     for name, lat, lon in targets:
@@ -210,24 +285,82 @@ def check_mission(
     return problems
 
 
+def _leg_heights(
+    raster: Raster,
+    a: tuple[float, float, float],
+    b: tuple[float, float, float],
+    cells_per_sample: float,
+) -> np.ndarray:
+    """Heights above the surface of dense samples of the straight leg from a to b (lat, lon,
+    AMSL; the height linear in the horizontal fraction), nan over no data."""
+    _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
+    lon, lat, t = _segment(raster, a[:2], b[:2], dist, cells_per_sample)
+    line = a[2] + (b[2] - a[2]) * t
+    result: np.ndarray = line - raster.height(lon, lat)
+    return result
+
+
 def leg_clearances(
     raster: Raster, sorties: list[FlownMission], cells_per_sample: float = 0.125
 ) -> list[list[float]]:
     """Per sortie, the least height of each leg (home, waypoints, home) above the terrain,
-    from samples every ``cells_per_sample`` cells (nan over no data)."""
-    eyes = [w for flown in sorties for w in flown.waypoints]
-    altitude = {round(w[2], 3) for w in eyes}
-    assert len(altitude) == 1, "the flight plane is not constant"
-    h = eyes[0][2]
+    from samples every ``cells_per_sample`` cells (nan over no data). Each waypoint is at its
+    own altitude; on a flight plane every leg is at the plane's."""
     out = []
     for flown in sorties:
-        path = [flown.home[:2], *[w[:2] for w in flown.waypoints], flown.home[:2]]
         legs = []
-        for a, b in itertools.pairwise(path):
-            _, _, dist = GEOD.inv(a[1], a[0], b[1], b[0])
-            lon, lat, _ = _segment(raster, a, b, dist, cells_per_sample)
-            ground = raster.height(lon, lat)
-            known = ground[np.isfinite(ground)]
-            legs.append(h - float(known.max()) if known.size else math.nan)
+        for a, b in itertools.pairwise(flown.path()):
+            h = _leg_heights(raster, a, b, cells_per_sample)
+            known = h[np.isfinite(h)]
+            legs.append(float(known.min()) if known.size else math.nan)
         out.append(legs)
     return out
+
+
+@dataclass
+class BandExcursions:
+    """How a band mission's written legs lie against the surface, from dense samples.
+
+    ``lowest_m`` and ``highest_m`` are the least and the greatest height above the surface
+    sampled anywhere; ``outside`` names every leg that leaves [floor, ceiling] (or crosses
+    no data), with how far."""
+
+    lowest_m: float
+    highest_m: float
+    outside: list[str]
+    legs: int
+
+
+def band_excursions(
+    dem: Path,
+    waypoints_files: Path | list[Path],
+    floor_m: float,
+    ceiling_m: float,
+    step_cells: float = 0.125,
+    slack_m: float = 0.0,
+) -> BandExcursions:
+    """Sample every written leg (from over home at the take-off height, through every
+    waypoint, back over home) every ``step_cells`` cells against the DSM; a leg is outside
+    where some sample is more than ``slack_m`` below ``floor_m`` or above ``ceiling_m`` over
+    the surface, or over no data."""
+    raster = load_raster(dem)
+    files = waypoints_files if isinstance(waypoints_files, list) else [waypoints_files]
+    lowest, highest = math.inf, -math.inf
+    outside: list[str] = []
+    count = 0
+    for number, path in enumerate(files, start=1):
+        flown = read_waypoints_file(path)
+        for k, (a, b) in enumerate(itertools.pairwise(flown.path()), start=1):
+            count += 1
+            h = _leg_heights(raster, a, b, step_cells)
+            where = f"{Path(path).name} (sortie {number}) leg {k}"
+            if not np.isfinite(h).all():
+                outside.append(f"{where} crosses no data")
+                h = h[np.isfinite(h)]
+                if not h.size:
+                    continue
+            low, high = float(h.min()), float(h.max())
+            lowest, highest = min(lowest, low), max(highest, high)
+            if low < floor_m - slack_m or high > ceiling_m + slack_m:
+                outside.append(f"{where} runs {low:.2f} to {high:.2f} m above the surface")
+    return BandExcursions(lowest, highest, outside, count)

@@ -19,6 +19,11 @@ own targets and, by :func:`judge_set`, all their photos on every target of the f
 Clearance is measured along the cruise legs: between consecutive GLOBAL_POSITION_INT fixes
 at the flight plane's altitude, the straight segment's least height above the DEM's bilinear
 surface, exactly (:func:`urpt_gcs.visibility.segments.segment_profile`).
+
+A plan inside a height band (``--agl``) flies no one plane: its summary names the band, its
+missions carry waypoints without a photo that follow the terrain (a summary's stops are the
+mission's photo waypoints), its cruise legs are every pair of fixes away from home, and every
+fix away from home is judged against the band (:mod:`urpt_gcs.replay.band_track`).
 """
 
 from __future__ import annotations
@@ -36,7 +41,14 @@ import pyproj
 
 from urpt_gcs.arrays import BoolArray, FloatArray
 from urpt_gcs.files.formats.qgc_plan import read_replay_check
-from urpt_gcs.flight.mission import Mission, photo_headings, waypoint_positions
+from urpt_gcs.flight.mission import Mission, photo_headings, photo_positions
+from urpt_gcs.replay.band_track import (
+    HOME_RADIUS_M,
+    BandTrack,
+    band_of_summary,
+    band_track,
+    band_track_text,
+)
 from urpt_gcs.replay.record import Flight
 from urpt_gcs.site.camera import Frame, grid_bearing_deg
 from urpt_gcs.site.dem import WGS84, open_dem, planning_crs
@@ -103,6 +115,9 @@ class Expected:
         Flags that override the mission's, or a summary that does not fit.
     frame, gsd_cm
         The plan's frame camera (None: the cone) and the ground resolution it had to reach.
+    band
+        The height band (floor, ceiling above the surface) the plan follows the terrain in,
+        from the summary; None for a plan on one flight plane.
     """
 
     fov_deg: float
@@ -113,6 +128,7 @@ class Expected:
     warnings: tuple[str, ...] = ()
     frame: Frame | None = None
     gsd_cm: float | None = None
+    band: tuple[float, float] | None = None
 
 
 def expected_checks(
@@ -148,11 +164,13 @@ def expected_checks(
     else:
         planned, where, names, targets = _from_summary(plan_path, mission, warnings)
         camera = _camera_from_summary(plan_path) if planned is not None else (None, None)
+    band = _band_from_summary(plan_path, mission, warnings)
     if planned is None:
         return Expected(
             fov_deg if fov_deg is not None else DEFAULT_FOV_DEG,
             min_clearance_m if min_clearance_m is not None else DEFAULT_MIN_CLEARANCE_M,
             warnings=tuple(warnings),
+            band=band,
         )
     fov, clearance = planned
     for flag, given, value, unit in (
@@ -172,7 +190,56 @@ def expected_checks(
         where,
         tuple(warnings),
         *camera,
+        band=band,
     )
+
+
+def _sortie_number(path: Path) -> int | None:
+    """The sortie a mission file is by its name: ``mission`` 1, ``mission_<k>`` k."""
+    stem = path.stem
+    if stem == "mission":
+        return 1
+    if stem.startswith("mission_") and stem[len("mission_") :].isdigit():
+        return int(stem[len("mission_") :])
+    return None
+
+
+def _describes(stops: list[tuple[float, float]], mission: Mission) -> bool:
+    """Whether a summary's stops of a sortie are the mission's photo waypoints."""
+    flown = photo_positions(mission)
+    return len(stops) == len(flown) and all(
+        abs(a - c) <= SAME_PLACE_DEG and abs(b - d) <= SAME_PLACE_DEG
+        for (a, b), (c, d) in zip(stops, flown, strict=True)
+    )
+
+
+def _band_from_summary(
+    path: Path, mission: Mission, warnings: list[str]
+) -> tuple[float, float] | None:
+    """The height band of the ``summary.json`` beside a mission file, if it describes it."""
+    summary_path = path.parent / SUMMARY_FILE
+    number = _sortie_number(path)
+    if number is None or not summary_path.is_file():
+        return None
+    try:
+        data: Any = json.loads(summary_path.read_text(encoding="utf-8"))
+        band = band_of_summary(data)
+        if band is None:
+            return None
+        stops = [
+            (float(s["lat_deg"]), float(s["lon_deg"]))
+            for s in data["stops"]
+            if s["sortie"] == number
+        ]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        warnings.append(
+            f"'{summary_path}' names no usable height band ({exc}): the track is not judged "
+            "against one"
+        )
+        return None
+    if not _describes(stops, mission):
+        return None
+    return band
 
 
 def _camera_from_summary(path: Path) -> tuple[Frame | None, float | None]:
@@ -196,10 +263,7 @@ def _from_summary(
 ) -> tuple[tuple[float, float] | None, str, tuple[str, ...] | None, None]:
     """The camera, clearance and target names for a .waypoints from the summary beside it."""
     summary_path = path.parent / SUMMARY_FILE
-    stem = path.stem
-    number = 1 if stem == "mission" else None
-    if stem.startswith("mission_") and stem[len("mission_") :].isdigit():
-        number = int(stem[len("mission_") :])
+    number = _sortie_number(path)
     if not summary_path.is_file() or number is None:
         return None, "", None, None
     fallback = "checking every target of --targets at --fov instead: plan again to fix it"
@@ -212,11 +276,9 @@ def _from_summary(
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
         warnings.append(f"'{summary_path}' is not a summary urpt-gcs wrote ({exc}); {fallback}")
         return None, "", None, None
-    flown = waypoint_positions(mission)
-    if len(placed) != len(flown) or any(
-        abs(a - c) > SAME_PLACE_DEG or abs(b - d) > SAME_PLACE_DEG
-        for (a, b), (c, d) in zip(placed, flown, strict=True)
-    ):
+    # The summary's stops are the photo waypoints: a band plan's missions also fly through
+    # waypoints without a photo that follow the terrain.
+    if not _describes(placed, mission):
         warnings.append(
             f"'{summary_path}' does not describe {path.name} (its sortie {number} has other "
             f"stops); {fallback}"
@@ -252,6 +314,8 @@ class ReplayReport:
     problems: tuple[str, ...]
     expected: Expected = Expected(DEFAULT_FOV_DEG, DEFAULT_MIN_CLEARANCE_M)
     home_amsl_m: float = 0.0
+    # A band plan's track against its band (None: a plan on one flight plane).
+    band: BandTrack | None = None
 
     @property
     def ok(self) -> bool:
@@ -307,7 +371,9 @@ def judge(
     target_xy = _xy(to_xy, [t.lat_deg for t in targets], [t.lon_deg for t in targets])
     photo_xy = _xy(to_xy, [p.lat_deg for p in flight.photos], [p.lon_deg for p in flight.photos])
     track_xy = _xy(to_xy, [p.lat_deg for p in flight.track], [p.lon_deg for p in flight.track])
+    home_xy = _xy(to_xy, [home[0]], [home[1]])[0]
     ground0 = mission.home.amsl_m
+    # Each photo at the altitude it was taken at, as reported: a band plan's differ.
     eye_z = ground0 + np.array([p.alt_rel_m for p in flight.photos], dtype=np.float64)
     track_z = ground0 + np.array([p.alt_rel_m for p in flight.track], dtype=np.float64)
     tan = math.tan(math.radians(expected.fov_deg))
@@ -330,7 +396,19 @@ def judge(
     for row in seen:
         if row.photo is None:
             problems.append(f"target {row.name} was photographed from no position that sees it")
-    clearance = _min_clearance(terrain, track_xy, track_z, flight, mission)
+    if expected.band is None:
+        cruise = np.array(
+            [p.alt_rel_m >= mission.altitude_rel_m - CRUISE_BAND_M for p in flight.track],
+            dtype=bool,
+        )
+        band = None
+    else:
+        # Following the terrain there is no one altitude: every fix away from home cruises.
+        off = np.hypot(track_xy[:, 0] - home_xy[0], track_xy[:, 1] - home_xy[1])
+        cruise = off > HOME_RADIUS_M
+        band = band_track(terrain, track_xy, track_z, home_xy, expected.band)
+        problems.extend(band.problems())
+    clearance = _min_clearance(terrain, track_xy, track_z, cruise)
     if clearance is None:
         problems.append("no position at the flight altitude was received: the flight is unchecked")
     elif clearance < expected.min_clearance_m:
@@ -347,6 +425,7 @@ def judge(
         tuple(problems),
         expected,
         ground0,
+        band,
     )
 
 
@@ -511,15 +590,10 @@ def _targets_seen(
 
 
 def _min_clearance(
-    terrain: Terrain,
-    track_xy: FloatArray,
-    track_z: FloatArray,
-    flight: Flight,
-    mission: Mission,
+    terrain: Terrain, track_xy: FloatArray, track_z: FloatArray, cruise: BoolArray
 ) -> float | None:
-    cruise = np.array(
-        [p.alt_rel_m >= mission.altitude_rel_m - CRUISE_BAND_M for p in flight.track], dtype=bool
-    )
+    """The least height above the terrain of the straight segments between consecutive
+    cruise fixes (None: no such segment over known ground)."""
     legs = np.flatnonzero(cruise[:-1] & cruise[1:])
     if legs.size == 0:
         return None
@@ -560,6 +634,8 @@ def report_text(report: ReplayReport) -> str:
             f"  clearance {report.min_clearance_m:.1f} m least above the terrain on cruise legs "
             f"(required {report.required_clearance_m:g} m)"
         )
+    if report.band is not None:
+        lines.append(f"  {band_track_text(report.band)}")
     lines.append(f"  result    {'PASS' if report.ok else 'FAIL'}")
     lines.extend(f"  problem   {problem}" for problem in report.problems)
     return "\n".join(lines)

@@ -147,6 +147,11 @@ class Step:
     climb: SCurve | None = None
     climb_s: float = 0.0
     climbed_m: float = 0.0
+    # A leg that moves and climbs (or descends) at once flies the straight line between its
+    # ends, as ArduCopter's waypoint controller does: the altitude it started from and the
+    # horizontal distance then left (None: the leg is level, or only climbs).
+    start_alt_m: float | None = None
+    start_distance_m: float = 0.0
     # Time on the ground after a landing step touched down.
     landed_s: float = 0.0
 

@@ -4,7 +4,9 @@ No sockets here: :meth:`Vehicle.step` advances simulated time, the ``command``/`
 methods are what COMMAND_LONG and SET_MODE do, and what the vehicle has to say (status text,
 mission progress, photos) collects in :attr:`Vehicle.events` for the server to send.
 
-The copter flies straight lines from rest to rest: horizontally on an S-curve of speed, as
+The copter flies straight lines from rest to rest, a leg that changes height on the 3-D line
+between its ends as ArduCopter's waypoint controller does (its horizontal speed held down so
+that the climb or descent keeps within its limits): horizontally on an S-curve of speed, as
 ArduCopter 4.x does, its acceleration built up at ``WPNAV_JERK`` and held within
 ``WPNAV_ACCEL``, with the mission's DO_CHANGE_SPEED (else ``WPNAV_SPEED``) between, and it
 returns home at ``RTL_SPEED`` (else ``WPNAV_SPEED``: ArduCopter's RTL starts its waypoint
@@ -370,12 +372,17 @@ class Vehicle:
         de, dn = east - self.east_m, north - self.north_m
         distance = math.hypot(de, dn)
         if step.profile is None and distance > 0.0:
-            step.profile = SCurve.for_leg(
-                distance,
-                step.speed_m_s or self.cruise_m_s(),
-                self.accel_m_s2(),
-                self.jerk_m_s3(),
-            )
+            speed, accel = step.speed_m_s or self.cruise_m_s(), self.accel_m_s2()
+            rise = step.alt_m - self.alt_m
+            if rise != 0.0 and not step.land:
+                # Along the 3-D line: the horizontal speed and acceleration held down so
+                # that the climb or descent keeps within its own limits.
+                rate = self.climb_m_s() if rise > 0 else self.descent_m_s(False)
+                ratio = distance / abs(rise)
+                speed = min(speed, rate * ratio)
+                accel = min(accel, self.climb_accel_m_s2() * ratio)
+                step.start_alt_m, step.start_distance_m = self.alt_m, distance
+            step.profile = SCurve.for_leg(distance, speed, accel, self.jerk_m_s3())
         if step.profile is None or distance == 0.0:
             ve = vn = 0.0
             self.ground_speed_m_s = 0.0
@@ -402,6 +409,13 @@ class Vehicle:
         dz = step.alt_m - self.alt_m
         if step.land:
             vz = self._descend(dt_s) if distance == 0.0 else 0.0  # over the point first
+        elif step.start_alt_m is not None:
+            # On the line: the height in proportion to the horizontal way flown.
+            done = 1.0 - distance / step.start_distance_m
+            alt = step.start_alt_m + (step.alt_m - step.start_alt_m) * done
+            vz = (alt - self.alt_m) / dt_s
+            self.alt_m = step.alt_m if distance == 0.0 else alt
+            self.climb_rate_m_s = 0.0 if distance == 0.0 else vz
         elif dz == 0.0:
             vz = self.climb_rate_m_s = 0.0
         else:
