@@ -11,6 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyproj
@@ -274,6 +275,24 @@ def read_band_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
     return dataclasses.replace(area, camera=settings.camera_at(area.camera.altitude_m))
 
 
+def site_fields(site: SiteInputs, area: PlanArea) -> dict[str, Any]:
+    """The fields of a :class:`~urpt_gcs.pipeline.result.Plan` that the site and the area
+    planned on give (the DEM, the targets, home, the camera), by name."""
+    return {
+        "dem": site.dem,
+        "terrain": area.terrain,
+        "targets": site.targets,
+        "crs": site.crs,
+        "targets_xy": site.targets_xy,
+        "ground_m": area.ground_m,
+        "home_xy": site.home_xy,
+        "home_ground_m": area.home_ground_m,
+        "home_source": site.home_source,
+        "camera": area.camera,
+        "terrain_max_m": area.terrain_max_m,
+    }
+
+
 def altitude_rel(area: PlanArea) -> float:
     """The plane's height above home as written: centimetres, rounded up, since a higher eye
     only widens the cone and lifts every line of sight, so nothing checked is lost.
@@ -386,5 +405,6 @@ __all__ = [
     "read_area",
     "read_band_area",
     "read_site",
+    "site_fields",
     "xy_to_latlon",
 ]

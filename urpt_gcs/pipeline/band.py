@@ -35,7 +35,7 @@ from urpt_gcs.flight.follow import path_in_band
 from urpt_gcs.flight.mission import GeoPoint, Mission, build_mission
 from urpt_gcs.flight.safety import Leg, geofence_polygon
 from urpt_gcs.memory import require_memory
-from urpt_gcs.pipeline.area import PlanArea, SiteInputs, latlon_to_xy, xy_to_latlon
+from urpt_gcs.pipeline.area import PlanArea, SiteInputs, latlon_to_xy, site_fields, xy_to_latlon
 from urpt_gcs.pipeline.missions import flight_model
 from urpt_gcs.pipeline.result import BandFlight, Plan
 from urpt_gcs.pipeline.settings import PlanSettings
@@ -169,17 +169,7 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
     )
     return Plan(
         settings=settings,
-        dem=site.dem,
-        terrain=area.terrain,
-        targets=site.targets,
-        crs=site.crs,
-        targets_xy=site.targets_xy,
-        ground_m=area.ground_m,
-        home_xy=site.home_xy,
-        home_ground_m=area.home_ground_m,
-        home_source=site.home_source,
-        camera=area.camera,
-        terrain_max_m=area.terrain_max_m,
+        **site_fields(site, area),
         regions=(),
         instance=instance,
         tour=tour,

@@ -20,7 +20,14 @@ from pathlib import Path
 
 from urpt_gcs.bound.certificate import bound_time_s
 from urpt_gcs.flight.margin import robust_tour
-from urpt_gcs.pipeline.area import PlanArea, SiteInputs, read_area, read_band_area, read_site
+from urpt_gcs.pipeline.area import (
+    PlanArea,
+    SiteInputs,
+    read_area,
+    read_band_area,
+    read_site,
+    site_fields,
+)
 from urpt_gcs.pipeline.band import plan_in_band
 from urpt_gcs.pipeline.improve import bounds_tour, certify_flight, refine_stops
 from urpt_gcs.pipeline.missions import sorties_and_missions
@@ -153,17 +160,7 @@ def finish_plan(
                 )
     return Plan(
         settings=settings,
-        dem=site.dem,
-        terrain=area.terrain,
-        targets=site.targets,
-        crs=site.crs,
-        targets_xy=site.targets_xy,
-        ground_m=area.ground_m,
-        home_xy=site.home_xy,
-        home_ground_m=area.home_ground_m,
-        home_source=site.home_source,
-        camera=area.camera,
-        terrain_max_m=area.terrain_max_m,
+        **site_fields(site, area),
         regions=regions,
         instance=instance,
         tour=tour,
