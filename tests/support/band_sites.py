@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ __all__ = [
     "RIDGE_CELL_M",
     "RIDGE_ORIGIN",
     "RIDGE_TARGETS_XY",
+    "cell_targets_csv",
     "ridge_surface",
     "ridge_targets_csv",
     "seeded_targets_csv",
@@ -95,6 +97,22 @@ def seeded_targets_csv(
         hlon, hlat = to_ll.transform(*src.xy(r0, c0))
     _write(out, [("Home", float(hlat), float(hlon)), *points])
     return points
+
+
+def cell_targets_csv(
+    dem: Path, home_cell: tuple[int, int], cells: Sequence[tuple[int, int]], out: Path
+) -> list[tuple[str, float, float]]:
+    """Write a Home at the centre of raster cell ``home_cell`` (row, column) and targets
+    ``T1``... at the centres of ``cells``; return the targets."""
+    with rasterio.open(dem) as src:
+        crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
+        to_ll = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+        rows = []
+        for k, (r, c) in enumerate([home_cell, *cells]):
+            lon, lat = to_ll.transform(*src.xy(r, c))
+            rows.append(("Home" if k == 0 else f"T{k}", float(lat), float(lon)))
+    _write(out, rows)
+    return rows[1:]
 
 
 def _write(out: Path, rows: list[tuple[str, float, float]]) -> None:
