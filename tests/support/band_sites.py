@@ -68,10 +68,19 @@ def ridge_targets_csv(out: Path) -> list[tuple[str, float, float]]:
 
 
 def seeded_targets_csv(
-    dem: Path, count: int, seed: int, out: Path, window_m: float = 3000.0
+    dem: Path,
+    count: int,
+    seed: int,
+    out: Path,
+    window_m: float = 3000.0,
+    home_lowest: bool = False,
 ) -> list[tuple[str, float, float]]:
     """Write ``count`` seeded targets on valid cells of a square window of ``window_m``
-    around the raster's centre, and a Home at the centre; return the targets."""
+    around the raster's centre, and a Home at the centre; return the targets.
+
+    With ``home_lowest`` Home is instead the window's lowest valid cell, so every target is
+    uphill of it: a vehicle whose simulator knows no terrain (ArduPilot's SITL holds the
+    ground flat at home's altitude) can reach every waypoint a band plan writes there."""
     rng = np.random.default_rng(seed)
     with rasterio.open(dem) as src:
         z = src.read(1, masked=True)
@@ -94,7 +103,19 @@ def seeded_targets_csv(
                 continue
             lon, lat = to_ll.transform(*src.xy(r, c))
             points.append((f"T{len(points) + 1}", float(lat), float(lon)))
-        hlon, hlat = to_ll.transform(*src.xy(r0, c0))
+        hr, hc = r0, c0
+        if home_lowest:
+            r_lo, c_lo = max(r0 - half, 2), max(c0 - half, 2)
+            window = np.ma.getdata(z)[
+                r_lo : min(r0 + half, rows - 2), c_lo : min(c0 + half, cols - 2)
+            ]
+            usable = np.zeros(window.shape, dtype=bool)
+            for i, j in np.argwhere(np.isfinite(window)):
+                r, c = r_lo + int(i), c_lo + int(j)
+                usable[i, j] = bool(valid[r - 2 : r + 3, c - 2 : c + 3].all())
+            i, j = np.unravel_index(np.where(usable, window, np.inf).argmin(), window.shape)
+            hr, hc = r_lo + int(i), c_lo + int(j)
+        hlon, hlat = to_ll.transform(*src.xy(hr, hc))
     _write(out, [("Home", float(hlat), float(hlon)), *points])
     return points
 

@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from urpt_gcs.errors import LinkError, SettingsError
-from urpt_gcs.flight.mission import GeoPoint
+from urpt_gcs.flight.mission import RELATIVE_ALT_FRAMES, GeoPoint, Mission
 from urpt_gcs.replay.launcher import Launch, RunningSitl, SitlKind, supervised, tail
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "find_defaults",
     "launch",
     "resolve_binary",
+    "unreachable_hint",
 ]
 
 BINARY_NAME = "arducopter"
@@ -98,6 +99,24 @@ def resolve_binary(path: Path | str | None) -> Path:
             f"(chmod +x it if it is one)"
         )
     return binary.resolve()
+
+
+def unreachable_hint(mission: Mission) -> str:
+    """Why a flight of ``mission`` on SITL may never end, to add to the error, or ''.
+
+    SITL holds the ground flat at home's altitude (it knows no terrain): a waypoint below home
+    (a plan inside a height band over a valley writes them) is under its ground. The copter
+    lands on the way there and waits, armed in AUTO, for a waypoint it never reaches.
+    """
+    heights = [item.z for item in mission.items if item.frame in RELATIVE_ALT_FRAMES]
+    below = [z for z in heights if z < 0.0]
+    if not below:
+        return ""
+    return (
+        f": {len(below)} of its waypoints are below home (down to {min(below):g} m); a "
+        "simulator that holds the ground flat at home's altitude (ArduPilot's SITL does) "
+        "lands short of them and never ends the mission"
+    )
 
 
 def find_defaults(binary: Path) -> Path:

@@ -237,6 +237,10 @@ class _Watch:
             await messages.aclose()
 
     def _position(self, fields: dict[str, Any]) -> None:
+        if fields["lat"] == 0 and fields["lon"] == 0:
+            # No position yet: ArduCopter sends 0, 0 until its EKF has an origin (the first
+            # few simulated seconds, which a loaded machine stretches past the upload).
+            return
         point = TrackPoint(
             fields["time_boot_ms"] / 1000.0,
             fields["lat"] * 1e-7,
@@ -393,6 +397,7 @@ async def fly_connected(
     except asyncio.TimeoutError:
         raise LinkError(
             f"{vehicle.describe()} did not land within {timeout_s:.0f} s of wall time"
+            + ardupilot_sitl.unreachable_hint(mission)
         ) from None
     except MavsdkError as exc:
         words = watch.arming_words() or (watch.texts[-1] if watch.texts else "")
