@@ -1,7 +1,8 @@
 """The height band on the two mountain rasters against the constant plane.
 
 ``python benchmarks/band_mountains.py SHARED_DEM_DIR [--targets 20 100] [--endurance 30]``
-writes seeded random targets (``band_sites.py``), plans each site inside ``--agl 30:120`` and
+writes seeded random targets in a 3 km window around each raster's centre, with Home at the
+centre (``tests/support/band_sites.py``, the same sites the tests plan), plans each site inside ``--agl 30:120`` and
 on the constant plane, and prints one row per plan: stops, waypoints inserted, sorties,
 flight time, horizontal length, the lowest and highest height above the surface along the
 written paths (band) or the plane's worst height above the ground (plane), the certified
@@ -19,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from band_sites import write_targets
+from support.band_sites import seeded_targets_csv
 
 from urpt_gcs import PlanSettings, plan
 from urpt_gcs.errors import UrptError
@@ -70,7 +71,7 @@ def main() -> None:
             dem = a.dem_dir / file
             for count in a.targets:
                 targets = Path(tmp) / f"{site}{count}.csv"
-                write_targets(dem, count, a.seed, targets)
+                seeded_targets_csv(dem, count, a.seed, targets)
                 base = dataclasses.replace(PlanSettings(), endurance_min=a.endurance)
                 band = dataclasses.replace(base, agl_band_m=(30.0, 120.0))
                 name = f"{site}, {count}"
