@@ -3,8 +3,8 @@
 ``python benchmarks/band_mountains.py SHARED_DEM_DIR [--targets 20 100] [--endurance 30]``
 writes seeded random targets in a 3 km window around each raster's centre, with Home at the
 centre (``tests/support/band_sites.py``, the same sites the tests plan), plans each site
-inside ``--agl 30:120`` and on the constant plane, and prints one row per plan: stops, waypoints inserted, sorties,
-flight time, horizontal length, the lowest and highest height above the surface along the
+inside ``--agl 30:120`` and on the constant plane, and prints one row per plan: stops,
+waypoints inserted, sorties, flight time, horizontal length, the lowest and highest height above the surface along the
 written paths (band) or the plane's worst height above the ground (plane), the certified
 gaps, and the wall time. Figures of past runs are in ``benchmarks/README.md``.
 """
