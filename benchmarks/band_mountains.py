@@ -4,9 +4,10 @@
 writes seeded random targets in a 3 km window around each raster's centre, with Home at the
 centre (``tests/support/band_sites.py``, the same sites the tests plan), plans each site
 inside ``--agl 30:120`` and on the constant plane, and prints one row per plan: stops,
-waypoints inserted, sorties, flight time, horizontal length, the lowest and highest height above the surface along the
-written paths (band) or the plane's worst height above the ground (plane), the certified
-gaps, and the wall time. Figures of past runs are in ``benchmarks/README.md``.
+waypoints inserted, sorties, flight time, horizontal length, the lowest and highest height
+above the surface along the written paths (band) or the plane's worst height above the
+ground (plane), the certified gaps, and the wall time. Figures of past runs are in
+``benchmarks/README.md``.
 """
 
 from __future__ import annotations
