@@ -110,7 +110,7 @@ def check_height_above_ground(
             f"{message}: lower --altitude/--clearance, raise --max-agl, or follow the terrain "
             "with --agl FLOOR:CEILING"
         )
-    return [message]
+    return [f"{message}; --agl FLOOR:CEILING (e.g. 30:120) follows the terrain instead"]
 
 
 def geofence_polygon(points_xy: FloatArray, margin_m: float) -> FloatArray:
