@@ -19,6 +19,7 @@ import numpy as np
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.lower_bound import lower_bound
+from urpt_gcs.bound.sorties import SortieBound
 from urpt_gcs.problem.regions import RegionSet
 
 __all__ = [
@@ -59,6 +60,14 @@ class Certificate:
     # The bound's shortest relaxed tour: a closed polyline meeting every outer star it
     # bounded (None when the search met none), from which a tour may be read.
     relaxed_tour_xy: FloatArray | None = None
+    # The bound of what the endurance forces on sorties from home (None: not computed);
+    # ``lower_bound_m`` is then the larger of its length and the single flight's bound.
+    sorties: SortieBound | None = None
+
+    @property
+    def single_flight_m(self) -> float:
+        """The bound of one closed flight from home, the returns home of sorties aside."""
+        return self.lower_bound_m if self.sorties is None else self.sorties.single_m
 
     def gap(self, length_m: float) -> float:
         """``(length - bound) / bound``: how much longer the flight may be than the shortest."""

@@ -6,6 +6,7 @@ mission will be written: the position margin, the written grid and the legs' cle
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -14,10 +15,11 @@ import pyproj
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.certificate import Certificate, certify
 from urpt_gcs.bound.geometric import geometric_lower_bound
+from urpt_gcs.bound.sorties import SortieBudget, sortie_bound, star_distances
 from urpt_gcs.flight.refinement import Refinement, Site, refine_along, refine_tour, written_grid
 from urpt_gcs.flight.sorties import SortieOrder
-from urpt_gcs.pipeline.area import PlanArea, SiteInputs
-from urpt_gcs.pipeline.missions import CheckedFlight, sorties_and_missions
+from urpt_gcs.pipeline.area import PlanArea, SiteInputs, altitude_rel
+from urpt_gcs.pipeline.missions import CheckedFlight, flight_model, sorties_and_missions
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages
 from urpt_gcs.problem.instance import Instance
@@ -109,11 +111,11 @@ def certify_flight(
     instance: Instance,
     flown_m: float,
     time_limit_s: float,
-    workers: int | None,
-    hold_m: float,
+    settings: PlanSettings,
 ) -> Certificate:
     """The certified lower bound of every flight from home whose stops see every target from
-    anywhere within ``hold_m`` of them.
+    anywhere within the position tolerance of them, flown in sorties that each fit the
+    endurance (:mod:`urpt_gcs.bound.sorties`).
 
     Parameters
     ----------
@@ -125,16 +127,16 @@ def certify_flight(
         The flight's length as flown.
     time_limit_s
         Seconds the bound may take.
-    workers
-        Worker threads (None: one per core).
-    hold_m
-        How far from its waypoint a stop still photographs (the position tolerance).
+    settings
+        The plan's settings: workers, the position tolerance (how far from its waypoint a
+        stop still photographs), the endurance and the flight model's speeds.
 
     Returns
     -------
     Certificate
         The lower bound and how it was proved.
     """
+    workers, hold_m = settings.workers, settings.position_tolerance_m
     regions, ratio = outer_regions(
         area.terrain,
         site.targets_xy,
@@ -146,7 +148,20 @@ def certify_flight(
     )
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
-    return certify(regions, flown_m, time_limit_s, also, ratio, tighten)
+    single = certify(regions, flown_m, time_limit_s, also, ratio, tighten)
+    endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
+    budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
+    stars = regions.outer
+    sorties = sortie_bound(
+        np.asarray([s.center_xy for s in stars], dtype=np.float64).reshape(-1, 2),
+        np.asarray([float(s.reach_m.max()) for s in stars]),
+        star_distances(stars, site.home_xy),
+        single.lower_bound_m,
+        budget,
+    )
+    value = max(single.lower_bound_m, min(sorties.length_m, flown_m))
+    method = single.method if value <= single.lower_bound_m else f"{single.method} + sorties"
+    return dataclasses.replace(single, lower_bound_m=value, method=method, sorties=sorties)
 
 
 def _check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site:
