@@ -73,11 +73,11 @@ class Certificate:
         """``(length - bound) / bound``: how much longer the flight may be than the shortest."""
         if self.lower_bound_m <= 0.0:
             return 0.0 if length_m <= 0.0 else math.inf
-        return max(length_m - self.lower_bound_m, 0.0) / self.lower_bound_m
+        return float(max(length_m - self.lower_bound_m, 0.0) / self.lower_bound_m)
 
     def proven(self, length_m: float) -> bool:
         """Whether the flight is within :data:`PROVEN_GAP` of the shortest possible."""
-        return self.gap(length_m) <= PROVEN_GAP
+        return bool(self.gap(length_m) <= PROVEN_GAP)
 
 
 def bound_time_s(time_limit_s: float) -> float:

@@ -29,8 +29,17 @@ is at least that of any larger radius. With what the pieces outside need, for ev
 is flown at the return speed, the rest at the cruise speed (each leg no faster than its
 length over its speed): its time is at least ``ends + stops * stop + h * length`` with
 ``h = min(1 / cruise, (1 / cruise + 1 / return) / 2)`` and ``ends`` the take-off and the
-landing. Summed over at least ``K(0)`` sorties, the total flight time is at least
-``K(0) * ends + max(K(0), S(0)) * stop + h * L``.
+landing. Legs also speed up and brake: a leg of at least ``delta`` (the length from which it
+reaches the cruise speed) takes exactly ``c`` more than its length over the speed. Take
+regions whose circles lie at least ``delta`` apart, ``Q`` of them: the stops that photograph
+them are at least ``delta`` apart, and within a sortie the legs and stops from one such stop
+to the next take at least one leg of their total length (a rest-to-rest leg's time is
+subadditive: two legs flown one after the other, stopping between, are one way of flying
+their sum). So the sorties' legs take at least ``(Q - K) * c`` beyond their length's share,
+and the count above holds with ``Q * c`` added to the work and ``c`` to what each sortie
+holds. The total flight time is at least
+``K * ends + max(K, S) * stop + max(Q - K, 0) * c + h * L``, at the least over the counts
+``K`` the bound allows.
 
 Nothing here sees a raster: regions are centres, reaches and distances from home.
 """
@@ -82,12 +91,17 @@ class SortieBudget:
         What every stop costs on top of its legs.
     per_metre_s
         Least time per metre flown over a whole sortie (see the module's text).
+    leg_from_m, leg_extra_s
+        A leg at least ``leg_from_m`` long takes ``leg_extra_s`` more than its length over
+        the cruise speed (speeding up and braking); infinite and 0 to leave that out.
     """
 
     endurance_s: float
     ends_s: float
     stop_s: float
     per_metre_s: float
+    leg_from_m: float = math.inf
+    leg_extra_s: float = 0.0
 
     @classmethod
     def of(cls, model: FlightModel, altitude_rel_m: float, endurance_s: float) -> SortieBudget:
@@ -110,7 +124,8 @@ class SortieBudget:
         cruise = 1.0 / model.cruise_m_s
         per_metre = min(cruise, 0.5 * (cruise + 1.0 / model.return_m_s))
         ends = model.takeoff_s(altitude_rel_m) + model.landing_s(altitude_rel_m)
-        return cls(endurance_s, ends, model.stop_s, per_metre)
+        leg_from, leg_extra = model.cruise_overhead()
+        return cls(endurance_s, ends, model.stop_s, per_metre, leg_from, leg_extra)
 
     @property
     def length_m(self) -> float:
@@ -240,8 +255,9 @@ def sortie_bound(
             continue
         trees[m] = pair.tree(far, r[far] - rho)
         work = max(trees[m], single_m) if rho == 0.0 else trees[m]
-        stops = max(len(_disjoint(xy[far], reach[far])), 1)
-        counts[m] = _far_sorties(work, rho, stops, budget)
+        stops = len(_apart(xy[far], reach[far], 0.0))
+        spread = len(_apart(xy[far], reach[far], budget.leg_from_m))
+        counts[m] = _far_sorties(work, rho, stops, spread, budget)
     # A sortie that reaches past a radius reaches past every smaller one too.
     counts = np.maximum.accumulate(counts[::-1])[::-1]
     best, at = single_m, 0.0
@@ -251,21 +267,34 @@ def sortie_bound(
         if inside + trees[m] > best:
             best, at = inside + trees[m], float(radii[m])
     sorties = int(counts[0])
-    stops_all = max(len(_disjoint(xy, reach)), sorties)
-    time_s = sorties * budget.ends_s + stops_all * budget.stop_s + budget.per_metre_s * best
-    return SortieBound(best, time_s, sorties, single_m, at)
+    stops = len(_apart(xy, reach, 0.0))
+    spread = len(_apart(xy, reach, budget.leg_from_m))
+
+    def total_s(k: int) -> float:
+        return (
+            k * budget.ends_s
+            + max(k, stops) * budget.stop_s
+            + max(spread - k, 0) * budget.leg_extra_s
+            + budget.per_metre_s * best
+        )
+
+    # Linear in the count between these, rising past the last: its least is at one of them.
+    time_s = min(total_s(k) for k in (sorties, stops, spread) if k >= sorties)
+    return SortieBound(float(best), float(time_s), sorties, float(single_m), at)
 
 
-def _far_sorties(work_m: float, rho: float, stops: int, budget: SortieBudget) -> int:
+def _far_sorties(work_m: float, rho: float, stops: int, spread: int, budget: SortieBudget) -> int:
     """How many sorties at least photograph the regions beyond ``rho``, which need
-    ``work_m`` of flight outside the disc of that radius and ``stops`` stops."""
-    h = budget.per_metre_s
+    ``work_m`` of flight outside the disc of that radius, ``stops`` stops and ``spread`` stops
+    whose legs between them reach the cruise speed."""
+    h, c = budget.per_metre_s, budget.leg_extra_s
     one_stop = budget.endurance_s - budget.ends_s - budget.stop_s - 2.0 * h * rho
-    all_stops = budget.endurance_s - budget.ends_s - 2.0 * h * rho
+    all_stops = budget.endurance_s - budget.ends_s - 2.0 * h * rho + c
     if one_stop <= 0.0:
         # No sortie can reach that far and photograph: no plan exists, and none is bounded.
         return 1
-    need = max(h * work_m / one_stop, (stops * budget.stop_s + h * work_m) / all_stops, 1.0)
+    work_s = stops * budget.stop_s + spread * c + h * work_m
+    need = max(h * work_m / one_stop, work_s / all_stops, 1.0)
     return math.ceil(need - _EPS)
 
 
@@ -327,20 +356,21 @@ class _PairDistances:
         return a.astype(np.int64), b.astype(np.int64), np.maximum(d - 2.0 * widest, 0.0)
 
 
-def _disjoint(xy: FloatArray, reach: FloatArray) -> list[int]:
-    """A set of regions no two of whose circles meet (greedy, in the given order): no point
-    photographs two of them."""
-    if len(xy) == 0:
+def _apart(xy: FloatArray, reach: FloatArray, gap_m: float) -> list[int]:
+    """A set of regions whose circles lie more than ``gap_m`` apart (greedy, in the given
+    order): the points that photograph two of them are more than ``gap_m`` apart (with
+    ``gap_m`` 0: no point photographs two of them). None with an infinite gap."""
+    if len(xy) == 0 or not math.isfinite(gap_m):
         return []
     tree = cKDTree(xy)
     widest = float(reach.max())
     taken: list[int] = []
     is_taken = np.zeros(len(xy), dtype=bool)
     for i in range(len(xy)):
-        near = tree.query_ball_point(xy[i], reach[i] + widest + 1e-9)
+        near = tree.query_ball_point(xy[i], reach[i] + widest + gap_m + 1e-6)
         clash = False
         for j in near:
-            if is_taken[j] and math.hypot(*(xy[i] - xy[j])) <= reach[i] + reach[j] + 1e-9:
+            if is_taken[j] and math.hypot(*(xy[i] - xy[j])) <= reach[i] + reach[j] + gap_m + 1e-9:
                 clash = True
                 break
         if not clash:

@@ -159,7 +159,7 @@ def certify_flight(
         single.lower_bound_m,
         budget,
     )
-    value = max(single.lower_bound_m, min(sorties.length_m, flown_m))
+    value = float(max(single.lower_bound_m, min(sorties.length_m, flown_m)))
     method = single.method if value <= single.lower_bound_m else f"{single.method} + sorties"
     return dataclasses.replace(single, lower_bound_m=value, method=method, sorties=sorties)
 

@@ -204,6 +204,19 @@ class FlightModel:
         out: FloatArray = np.where(d >= v * ramp, d / v + ramp, 2.0 * self._ramp_s(peak))
         return out
 
+    def cruise_overhead(self) -> tuple[float, float]:
+        """From which length a level leg reaches the cruise speed, and what it then takes
+        beyond its length over that speed (speeding up and braking).
+
+        Returns
+        -------
+        tuple of float
+            The length (m) and the extra time (s): every leg at least that long takes
+            ``length / cruise_m_s`` plus that time, exactly.
+        """
+        ramp = float(self._ramp_s(np.asarray(self.cruise_m_s)))
+        return self.cruise_m_s * ramp, ramp
+
     def return_s(self, length_m: FloatArray | float) -> FloatArray:
         """Time of the leg home, from rest at the last stop to rest over home."""
         return self.leg_s(length_m, self.return_m_s)
