@@ -14,11 +14,11 @@ and counted), in two forms:
 On each, ours (the solver, then the sortie order, sharing the time as ``--time-limit`` is
 shared) and PyVRP (``MaxRuntime``) run one after the other for each ``--time``, the process
 pinned to one core. Each side's sorties are timed again by ``FlightModel.sortie_s`` and
-checked (every target seen, every sortie within the endurance); a side whose own total differs
-from the recomputed one by more than the rounding to centiseconds is reported. Sites: the
-demo at ``--endurance`` 4 min, the synthetic scale site with 100 and 300 targets at 20 min,
-and seeded targets on two rasters of ``../shared/dem`` at 20 min. Figures of past runs are in
-``benchmarks/README.md``.
+checked (every target seen once, every sortie within the endurance); a side whose own total
+differs from the recomputed one by more than the rounding to centiseconds is reported. Sites:
+the demo at ``--endurance`` 4 min, the synthetic scale site (2 km square) with 100 and 300
+targets at 20 min, and seeded targets on two rasters of ``../shared/dem`` (``REAL_SITES``).
+Figures of past runs are in ``benchmarks/README.md``.
 """
 
 from __future__ import annotations
@@ -122,6 +122,8 @@ def _side(run: SortieRun, check: SortieCheck, endurance_s: float) -> str:
     problems = []
     if check.uncovered:
         problems.append(f"{len(check.uncovered)} targets unseen")
+    if check.repeated:
+        problems.append(f"{len(check.repeated)} targets seen twice")
     if check.over_endurance:
         problems.append(f"{len(check.over_endurance)} sorties over the endurance")
     if abs(run.reported_s - check.flight_time_s) > REPORT_TOLERANCE_S * (
