@@ -329,9 +329,22 @@ def _ticks(seconds: FloatArray | float) -> IntArray:
 def pyvrp_data(
     instance: Instance, altitude_rel_m: float, model: FlightModel, endurance_s: float
 ) -> pyvrp.ProblemData:
-    """The instance as PyVRP's ``ProblemData``: home the depot (location 0), viewpoint ``v``
-    client ``v`` (location ``v + 1``), and one required group per target when a target has
-    more than one viewpoint (see the module's description)."""
+    """The instance as PyVRP's ``ProblemData`` (see the module's description).
+
+    Parameters
+    ----------
+    instance
+        Viewpoints on the plane, each seeing one target, with home as the depot.
+    altitude_rel_m, model, endurance_s
+        The flight plane above home, the flight-time model and the endurance.
+
+    Returns
+    -------
+    pyvrp.ProblemData
+        Home the depot (location 0) and viewpoint ``v`` client ``v`` (location ``v + 1``);
+        when some target has more than one viewpoint, every target a required client group
+        of its viewpoints, else every client required.
+    """
     import pyvrp
 
     assert instance.points_xy is not None and instance.depot_xy is not None
