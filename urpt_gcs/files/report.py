@@ -243,13 +243,28 @@ def _bound(plan: Plan) -> dict[str, Any] | None:
     c = plan.certificate
     if c is None:
         return None
-    return {
+    out: dict[str, Any] = {
         "method": c.method,
         "seconds": round(c.seconds, 3),
         "sectors": c.sectors,
         "outer_to_inner_area": _round(c.area_ratio, 3),
         "holding_m": plan.settings.position_tolerance_m,
     }
+    found = c.sorties
+    if found is not None:
+        # What the endurance forces (bound.sorties): rounded down, the gap up.
+        time_bound = math.floor(found.flight_time_s * 10.0) / 10.0
+        out |= {
+            "single_flight_bound_m": math.floor(found.single_m * 1000.0) / 1000.0,
+            "sorties_at_least": found.sorties,
+            "flight_time_bound_s": time_bound,
+            "flight_time_gap_pct": _round_up(
+                100.0 * (plan.flight_time_s - time_bound) / time_bound, 2
+            )
+            if time_bound > 0.0
+            else None,
+        }
+    return out
 
 
 def _altitude_curve(plan: Plan) -> dict[str, Any]:
@@ -477,6 +492,15 @@ def summary_text(data: dict[str, Any]) -> str:
                 for s in data["sorties"]
             )
         )
+        bound = data.get("bound") or {}
+        if bound.get("sorties_at_least") is not None:
+            gap = bound["flight_time_gap_pct"]
+            lines.append(
+                f"sortie bound   at least {bound['sorties_at_least']} "
+                f"sortie{'s' if bound['sorties_at_least'] != 1 else ''} and "
+                f"{_minutes(bound['flight_time_bound_s'])} of flight"
+                + ("" if gap is None else f" (time within {_percent(max(gap, 0.0))} % of it)")
+            )
         found = data["sortie_order"]
         if found is not None:
             lines.append(

@@ -110,6 +110,7 @@ def certify_flight(
     area: PlanArea,
     instance: Instance,
     flown_m: float,
+    tour_m: float,
     time_limit_s: float,
     settings: PlanSettings,
 ) -> Certificate:
@@ -125,6 +126,9 @@ def certify_flight(
         The viewpoints' instance, whose geometric bound the certificate may also use.
     flown_m
         The flight's length as flown.
+    tour_m
+        A closed flight from home that photographs every target, in one piece: the bound of
+        one flight searches below it (sorties, flown longer, would let it search wider).
     time_limit_s
         Seconds the bound may take.
     settings
@@ -148,7 +152,7 @@ def certify_flight(
     )
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
-    single = certify(regions, flown_m, time_limit_s, also, ratio, tighten)
+    single = certify(regions, min(flown_m, tour_m), time_limit_s, also, ratio, tighten)
     endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
     budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
     stars = regions.outer

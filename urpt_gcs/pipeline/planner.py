@@ -143,7 +143,9 @@ def finish_plan(
         bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
         stages.say(f"bounding the shortest possible flight (up to {bound_s:.1f} s)")
         flown_m = math.fsum(s.length_m for s in flight.sorties)
-        certificate = certify_flight(site, area, instance, flown_m, bound_s, settings)
+        certificate = certify_flight(
+            site, area, instance, flown_m, planned.length, bound_s, settings
+        )
         stages.lap("bound")
         if refinement is not None:
             stages.say("reading a tour off the bound")
