@@ -21,9 +21,9 @@ replaces ``M``: the sorties joined at home are one closed flight.
 
 *Their length.* Sortie ``j`` reaching ``R_j`` from home flies at least ``2 min(R_j, rho)``
 inside the disc; summed, ``2 * integral_0^rho #{j : R_j >= s} ds``, and the count at ``s``
-is at least that of any larger radius. With what the pieces outside need, for every
-``rho``: ``L >= 2 * integral_0^rho K(s) ds + M(rho)``; the bound is the largest of those and
-``B``.
+is at least that of any larger radius, and up to the nearest region's distance it is every
+sortie. With what the pieces outside need, for every ``rho``:
+``L >= 2 * integral_0^rho K(s) ds + M(rho)``; the bound is the largest of those and ``B``.
 
 *Time.* A sortie's return leg is no longer than the rest of it, so at most half its length
 is flown at the return speed, the rest at the cruise speed (each leg no faster than its
@@ -258,8 +258,10 @@ def sortie_bound(
         stops = len(_apart(xy[far], reach[far], 0.0))
         spread = len(_apart(xy[far], reach[far], budget.leg_from_m))
         counts[m] = _far_sorties(work, rho, stops, spread, budget)
-    # A sortie that reaches past a radius reaches past every smaller one too.
+    # A sortie that reaches past a radius reaches past every smaller one too; and every
+    # sortie reaches the nearest region, so up to its distance all of them count.
     counts = np.maximum.accumulate(counts[::-1])[::-1]
+    counts[radii <= r.min()] = counts[0]
     best, at = single_m, 0.0
     inside = 0.0
     for m in range(1, radii.size):
@@ -345,11 +347,17 @@ class _PairDistances:
             a, b = np.triu_indices(k, 1)
         else:
             try:
-                simplices = Delaunay(pts).simplices
+                triangulation = Delaunay(pts)
+                simplices = triangulation.simplices
             except QhullError:  # collinear or repeated centres: every pair
                 a, b = np.triu_indices(k, 1)
             else:
-                e = np.vstack([simplices[:, [0, 1]], simplices[:, [1, 2]], simplices[:, [0, 2]]])
+                # Qhull leaves repeated centres out of every triangle: each joins the one it
+                # repeats (or the nearest vertex), by an edge of its own length.
+                twins = np.asarray(triangulation.coplanar, dtype=np.int64).reshape(-1, 3)[:, [0, 2]]
+                e = np.vstack(
+                    [simplices[:, [0, 1]], simplices[:, [1, 2]], simplices[:, [0, 2]], twins]
+                )
                 e = np.unique(np.sort(e, axis=1), axis=0)
                 a, b = e[:, 0], e[:, 1]
         d = np.hypot(*(pts[a] - pts[b]).T)
