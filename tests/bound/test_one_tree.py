@@ -80,3 +80,34 @@ def test_never_above_a_known_tour_on_hundreds_of_regions_even_stopped_early() ->
     auto = lower_bound(regions, tour, 2.0)
     assert auto.value >= full.value * 0.99 and auto.value <= tour
     assert "of 300" in auto.method or auto.method == "one-tree over all 300"
+
+
+def test_the_certificate_over_300_targets_covers_every_one() -> None:
+    from urpt_gcs.bench.paper import ALTITUDE, random_targets, tin_terrain
+    from urpt_gcs.bound.certificate import certify
+    from urpt_gcs.visibility.outer import WALKED_ALWAYS, outer_regions
+    from urpt_gcs.visibility.regions import Camera
+
+    terrain = tin_terrain(0)
+    targets = random_targets(0, 300)
+    ground = terrain.sample(targets[:, 0], targets[:, 1])
+    camera = Camera(ALTITUDE, 40.0)
+    home = (float(targets[:, 0].mean()), float(targets[:, 1].mean()))
+    # No time for walks past the first ones: the others keep their cone's disc.
+    regions, _ = outer_regions(terrain, targets, ground, camera, home, time_limit_s=0.0)
+    assert regions.n == 300
+    discs = [bool(np.all(s.reach_m == s.reach_m[0])) for s in regions.outer]
+    assert sum(discs) >= 300 - WALKED_ALWAYS
+    cone = camera.cone_radius_m(ground)
+    for star, r in zip(regions.outer, cone, strict=True):
+        assert float(star.reach_m.max()) <= r * (1.0 + 1e-9)
+    cert = certify(regions, 1e7, 1.0)
+    assert cert.lower_bound_m > 0.0
+    # Either the 1-tree over every region or the order search over 150 of them won (the
+    # regions holding home are left out: every flight from home is in them).
+    kept = 300 - sum(regions.depot_inside or ())
+    assert cert.method == f"one-tree over all {kept}" or f"of {kept} far" in cert.method
+    # One round of the 1-tree (where the certificate's starts) over every kept region.
+    first = lower_bound(regions, 1e7, 0.0, method="one-tree")
+    assert first.method == f"one-tree over all {kept}"
+    assert cert.lower_bound_m >= first.value
