@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numba as nb
 import numpy as np
@@ -28,12 +28,31 @@ from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import FloatArray
 
-if TYPE_CHECKING:
-    from urpt_gcs.bound.lower_bound import Pieces
-
 __all__ = ["one_tree_bound"]
 
 I64 = npt.NDArray[np.int64]
+
+
+class _Pieces(Protocol):
+    """Annular sectors by region, as :class:`urpt_gcs.bound.lower_bound.Pieces` holds them."""
+
+    @property
+    def region(self) -> I64: ...
+
+    @property
+    def cx(self) -> FloatArray: ...
+
+    @property
+    def cy(self) -> FloatArray: ...
+
+    @property
+    def r1(self) -> FloatArray: ...
+
+    @property
+    def n(self) -> int: ...
+
+    def circles(self) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+
 
 # Per region: the nearest regions (by centre) whose piece pairs are weighed one by one.
 _NEAR = 10
@@ -190,7 +209,7 @@ def _near_lists(cx: FloatArray, cy: FloatArray) -> tuple[I64, I64]:
 
 
 def one_tree_bound(
-    pieces: Pieces, m: int, upper: float, time_limit_s: float, gap_target: float = 1e-4
+    pieces: _Pieces, m: int, upper: float, time_limit_s: float, gap_target: float = 1e-4
 ) -> tuple[float, int]:
     """The best 1-tree bound found within ``time_limit_s`` (the first round always runs),
     and the rounds run.
