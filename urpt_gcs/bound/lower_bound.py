@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba as nb
 import numpy as np
@@ -42,11 +42,13 @@ import numpy.typing as npt
 from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.one_tree import one_tree_bound
 from urpt_gcs.bound.order_bound import order_bound
 from urpt_gcs.problem.regions import OuterStar, RegionSet
 
 __all__ = [
     "EXACT_MAX_REGIONS",
+    "ORDER_MAX_REGIONS",
     "Bound",
     "Pieces",
     "Row",
@@ -65,6 +67,11 @@ I64 = npt.NDArray[np.int64]
 
 # Regions beside the depot from which the exact relaxed optimum is out of reach.
 EXACT_MAX_REGIONS = 9
+# Regions the order search of method "auto" takes at most: beyond, it bounds that many far
+# apart (every tour enters those too) and the 1-tree bound covers them all.
+ORDER_MAX_REGIONS = 150
+# Share of the time the 1-tree bound over every region takes when both run.
+_ONE_TREE_SHARE = 0.25
 # Per region: the nearest regions whose piece pairs the Lagrangian weighs exactly.
 _NEAR = 12
 # Pieces per region at the start: sectors x radial bands.
@@ -516,17 +523,23 @@ def lower_bound(
     gap_target
         Stop once ``(upper - bound) / bound`` is at most this.
     method
-        ``auto`` or ``order``: branch and bound over visiting orders (:func:`order_bound`);
-        ``exact`` or ``lagrangian`` for the relaxed piece problem; ``pieces``: exact for a
-        few regions, else the Lagrangian and the exact optimum over a subset far apart.
+        ``order``: branch and bound over visiting orders (:func:`order_bound`); ``auto``:
+        that, and beyond :data:`ORDER_MAX_REGIONS` regions the larger of the order search
+        over that many far apart and the 1-tree bound over all of them
+        (:func:`~urpt_gcs.bound.one_tree.one_tree_bound`, alone: ``one-tree``); ``exact`` or
+        ``lagrangian`` for the relaxed piece problem (small instances); ``pieces``: exact
+        for a few regions, else the Lagrangian and the exact optimum over a subset far apart.
     exact_shapes
         The polygons are the regions themselves, not only inside them: the order search
         bounds the polygons (tighter than their outer stars). Leave it False when the outer
         stars are the only sets known to hold the regions (regions on terrain).
     """
     started = time.perf_counter()
-    if method in ("auto", "order"):
+    kept = int(np.count_nonzero(~skipped_regions(regions)))
+    if method == "order" or (method == "auto" and kept <= ORDER_MAX_REGIONS):
         return _order(regions, upper, time_limit_s, gap_target, exact_shapes)
+    if method in ("auto", "one-tree"):
+        return _all_regions(regions, upper, time_limit_s, gap_target, exact_shapes, method)
     pieces, boundary = start_pieces(regions)
     skip = skipped_regions(regions)
     stars: list[OuterStar | None] = [s for s, k in zip(regions.outer, skip, strict=True) if not k]
@@ -608,6 +621,50 @@ def subset_bound(
         depot_inside=tuple(False for _ in chosen),
     )
     return lower_bound(sub, upper, time_limit_s, gap_target, method="pieces")
+
+
+def _all_regions(
+    regions: RegionSet,
+    upper: float,
+    time_limit_s: float,
+    gap_target: float,
+    exact_shapes: bool,
+    method: str,
+) -> Bound:
+    """The 1-tree bound over every region and, for ``auto``, the order search over
+    :data:`ORDER_MAX_REGIONS` of them far apart: the larger (both hold, so does it)."""
+    started = time.perf_counter()
+    pieces, _ = start_pieces(regions)
+    m = int(pieces.region[-1]) + 1
+    share = 1.0 if method == "one-tree" else _ONE_TREE_SHARE
+    value, rounds = one_tree_bound(pieces, m, upper, share * time_limit_s, gap_target)
+    kept = m - (regions.depot_xy is not None)
+    found = Bound(min(value, upper), f"one-tree over all {kept}", rounds, pieces.n, 0.0)
+    if method == "auto" and upper - value > gap_target * value:
+        chosen = sorted(spread_subset(regions, ORDER_MAX_REGIONS))
+        sub = RegionSet(
+            discs=None if regions.discs is None else regions.discs[chosen],
+            polygons=None
+            if regions.polygons is None
+            else tuple(regions.polygons[i] for i in chosen),
+            depot_xy=regions.depot_xy,
+            outer=tuple(regions.outer[i] for i in chosen),
+            depot_inside=tuple(False for _ in chosen),
+            name=regions.name,
+        )
+        left = max(time_limit_s - (time.perf_counter() - started), 0.0)
+        order = _order(sub, upper, left, gap_target, exact_shapes)
+        if order.value > found.value:
+            found = replace(order, method=f"order over {len(chosen)} of {kept} far apart")
+        else:
+            found = replace(
+                found,
+                order_nodes=order.order_nodes,
+                order_open=order.order_open,
+                relaxed_tour_m=order.relaxed_tour_m,
+                relaxed_tour_xy=order.relaxed_tour_xy,
+            )
+    return replace(found, seconds=time.perf_counter() - started)
 
 
 def _order(

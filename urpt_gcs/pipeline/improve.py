@@ -28,6 +28,10 @@ from urpt_gcs.site.reading import fill_along
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.outer import finer_stars, outer_regions
 
+# Share of the bound's time the outer stars past the first ones (those far apart, walked
+# whatever the clock) may take to walk, beside the bound's own time.
+_WALK_SHARE = 0.5
+
 # How much shorter a tour read off the bound must be to replace the refined one.
 _BETTER = 1e-6
 
@@ -149,6 +153,7 @@ def certify_flight(
         site.home_xy,
         workers=workers,
         hold_m=hold_m,
+        time_limit_s=_WALK_SHARE * time_limit_s,
     )
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 import shapely
@@ -25,19 +26,21 @@ from urpt_gcs.visibility.regions import Camera
 from urpt_gcs.visibility.stars import FINER_SPLIT, STAR_SECTORS, finer_wedges, star_reach
 
 __all__ = [
-    "BOUND_MAX_REGIONS",
+    "WALKED_ALWAYS",
     "finer_stars",
     "outer_regions",
     "points_along",
-    "spread_targets",
     "star_holds",
     "star_polygon",
     "star_sectors",
 ]
 
-# Regions the bound is computed over at most: beyond, the regions farthest apart (every
-# flight enters those too), since the relaxation's first round grows with their square.
-BOUND_MAX_REGIONS = 150
+# Stars walked on the DEM whatever the clock (the farthest apart first, the ones the order
+# search bounds); the others are walked while the time allowed lasts, in chunks of this
+# many per worker, and the rest keep their camera cone's disc (which holds every point
+# that sees the target).
+WALKED_ALWAYS = 150
+_WALK_CHUNK = 16
 # Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
 _FINE_UP_TO = 24
 _LEAST_SECTORS = 180
@@ -54,24 +57,51 @@ _TOUCH = 1e-3
 _TOUCH_EDGE = 0.05
 
 
-def spread_targets(
-    targets_xy: FloatArray, radius_m: FloatArray, depot_xy: tuple[float, float] | None, k: int
+def _spread_order(
+    xy: FloatArray, radius_m: FloatArray, depot_xy: tuple[float, float] | None, k: int
 ) -> list[int]:
-    """``k`` targets whose discs of ``radius_m`` lie far apart (farthest-point order), from
-    the one farthest from the depot (or from target 0); all of them when there are no more."""
-    xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
-    r = np.asarray(radius_m, dtype=np.float64)
-    if len(xy) <= k:
-        return list(range(len(xy)))
+    """``k`` targets whose discs lie far apart (farthest-point order), from the one farthest
+    from the depot (or from target 0)."""
     origin = xy[0] if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
-    gap = np.hypot(*(xy - origin).T) - r
+    gap = np.hypot(*(xy - origin).T) - radius_m
     chosen: list[int] = []
-    for _ in range(k):
+    for _ in range(min(k, len(xy))):
         j = int(np.argmax(gap))
         chosen.append(j)
-        gap = np.minimum(gap, np.hypot(*(xy - xy[j]).T) - r - r[j])
+        gap = np.minimum(gap, np.hypot(*(xy - xy[j]).T) - radius_m - radius_m[j])
         gap[chosen] = -np.inf
-    return sorted(chosen)
+    return chosen
+
+
+def _walked(
+    terrain: Terrain,
+    xy: FloatArray,
+    ground: FloatArray,
+    camera: Camera,
+    depot_xy: tuple[float, float] | None,
+    sectors: int,
+    workers: int | None,
+    time_limit_s: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Outer and inner reaches: walked for the stars farthest apart and for as many others
+    as the time allows, the cone's disc (and nothing known inside) for the rest."""
+    started = time.perf_counter()
+    cone = camera.cone_radius_m(ground)
+    outer = np.repeat(np.asarray(cone, dtype=np.float64)[:, None], sectors, axis=1)
+    inner = np.zeros_like(outer)
+    first = _spread_order(xy, cone, depot_xy, WALKED_ALWAYS)
+    rest = np.setdiff1d(np.arange(len(xy)), first)
+    chunk = _WALK_CHUNK * max(1, workers or 1)
+    batches = [np.asarray(first, dtype=np.int64)]
+    batches += [rest[k : k + chunk] for k in range(0, rest.size, chunk)]
+    for k, idx in enumerate(batches):
+        if k > 0 and time.perf_counter() - started >= time_limit_s:
+            break
+        if idx.size:
+            outer[idx], inner[idx] = star_reach(
+                terrain, xy[idx], ground[idx], camera, sectors, workers
+            )
+    return outer, inner
 
 
 def star_sectors(regions: int) -> int:
@@ -88,11 +118,15 @@ def outer_regions(
     camera: Camera,
     depot_xy: tuple[float, float] | None,
     workers: int | None = 1,
-    max_regions: int = BOUND_MAX_REGIONS,
     hold_m: float = 0.0,
+    time_limit_s: float = math.inf,
 ) -> tuple[RegionSet, float]:
-    """The targets' outer stars as regions to enter (of at most ``max_regions`` targets far
-    apart), home as the depot, and the ratio of the stars' area to what is certainly seen.
+    """Every target's outer star as a region to enter, home as the depot, and the ratio of
+    the stars' area to what is certainly seen.
+
+    The :data:`WALKED_ALWAYS` stars farthest apart are walked on the DEM; the others while
+    ``time_limit_s`` lasts, and those left keep the disc of the camera's cone about their
+    target (nothing outside it sees the target; nothing is known seen inside).
 
     With ``hold_m`` > 0 the regions are where a stop sees its target from anywhere within
     ``hold_m`` of it (the plan's position tolerance): such a stop ``p`` at angle ``t`` from the
@@ -104,10 +138,8 @@ def outer_regions(
     """
     xy = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
     ground = np.asarray(ground_m, dtype=np.float64)
-    keep = spread_targets(xy, camera.cone_radius_m(ground), depot_xy, max_regions)
-    xy, ground = xy[keep], ground[keep]
-    sectors = star_sectors(len(keep))
-    outer, inner = star_reach(terrain, xy, ground, camera, sectors, workers)
+    sectors = star_sectors(len(xy))
+    outer, inner = _walked(terrain, xy, ground, camera, depot_xy, sectors, workers, time_limit_s)
     if hold_m > 0.0:
         outer = np.maximum(outer - hold_m, 0.0)
         inner = np.minimum(np.maximum(inner - hold_m, 0.0), outer)
