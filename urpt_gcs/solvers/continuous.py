@@ -213,7 +213,9 @@ def solve_regions(
     if not inside.all() or np.unique(best_seq).size != regions.n:
         raise PlanError("internal check failed: a refined tour left a region; report this")
     left = max(settings.time_limit_s - (time.perf_counter() - started), 0.05)
-    bound = lower_bound(regions, best_len, left, gap_target)
+    # The order search over every disc: its relaxed tour meets them all, so a tour may be
+    # read off it (below); ``auto`` would bound large instances over a subset.
+    bound = lower_bound(regions, best_len, left, gap_target, method="order")
     # For discs the bound's search meets real tours: the shortest it met may beat ours.
     relaxed = _from_relaxed(regions, bound.relaxed_tour_xy)
     if relaxed is not None:
