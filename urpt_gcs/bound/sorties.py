@@ -72,7 +72,7 @@ __all__ = [
 THRESHOLDS = 48
 # Up to this many regions the spanning trees use every pair's distance; above, the widest
 # reach for every region, whose tree lies in the centres' Delaunay triangulation.
-DENSE_MAX_REGIONS = 1500
+DENSE_MAX_REGIONS = 400
 # Rounding slack: a count within this of an integer is not rounded up past it.
 _EPS = 1e-9
 
@@ -247,6 +247,10 @@ def sortie_bound(
     radii = np.concatenate([[0.0], r[order[picks]]])
     radii = np.unique(radii)
     pair = _PairDistances(xy, reach)
+    # Regions apart, chosen farthest first: those beyond any radius are apart too.
+    farthest = np.argsort(-r, kind="stable")
+    stop_r = np.sort(r[farthest[_apart(xy[farthest], reach[farthest], 0.0)]])
+    spread_r = np.sort(r[farthest[_apart(xy[farthest], reach[farthest], budget.leg_from_m)]])
     counts = np.zeros(radii.size)
     trees = np.zeros(radii.size)
     for m, rho in enumerate(radii.tolist()):
@@ -255,8 +259,8 @@ def sortie_bound(
             continue
         trees[m] = pair.tree(far, r[far] - rho)
         work = max(trees[m], single_m) if rho == 0.0 else trees[m]
-        stops = len(_apart(xy[far], reach[far], 0.0))
-        spread = len(_apart(xy[far], reach[far], budget.leg_from_m))
+        stops = stop_r.size - int(np.searchsorted(stop_r, rho, side="left"))
+        spread = spread_r.size - int(np.searchsorted(spread_r, rho, side="left"))
         counts[m] = _far_sorties(work, rho, stops, spread, budget)
     # A sortie that reaches past a radius reaches past every smaller one too; and every
     # sortie reaches the nearest region, so up to its distance all of them count.
@@ -269,8 +273,7 @@ def sortie_bound(
         if inside + trees[m] > best:
             best, at = inside + trees[m], float(radii[m])
     sorties = int(counts[0])
-    stops = len(_apart(xy, reach, 0.0))
-    spread = len(_apart(xy, reach, budget.leg_from_m))
+    stops, spread = stop_r.size, spread_r.size
 
     def total_s(k: int) -> float:
         return (
