@@ -404,9 +404,22 @@ def _pattern_search(
             new = np.hypot(*(cand - a[:, None]).transpose(2, 0, 1)) + np.hypot(
                 *(cand - b[:, None]).transpose(2, 0, 1)
             )
-            value = np.where(new < old[:, None] - _MIN_GAIN_M, new, np.inf)
-            pick = _best_feasible(site, cand, value, sees[k], heading, k, a, b, depot)
-            moved = pick >= 0
+            better = new < old[:, None] - _MIN_GAIN_M
+            si, ti = np.nonzero(better)
+            ok = np.zeros(better.shape, dtype=bool)
+            if si.size:
+                ok[si, ti] = _feasible(
+                    site,
+                    cand[si, ti],
+                    sees[k[si]],
+                    None if heading is None else heading[k[si]],
+                    a[si],
+                    b[si],
+                    depot,
+                )
+            value = np.where(ok, new, np.inf)
+            pick = value.argmin(axis=1)
+            moved = np.isfinite(value[np.arange(k.size), pick])
             for j in np.flatnonzero(moved):
                 pts[k[j]] = cand[j, pick[j]]
                 gained += float(old[j] - value[j, pick[j]])
@@ -416,44 +429,6 @@ def _pattern_search(
         if gained <= 1e-9 * max(before, 1.0) and bool(np.all(step < _LAST_STEP_M)):
             break
     return moves, sweeps
-
-
-def _best_feasible(
-    site: Site,
-    cand: FloatArray,
-    value: FloatArray,
-    sees: BoolArray,
-    heading: FloatArray | None,
-    k: np.ndarray,
-    a: FloatArray,
-    b: FloatArray,
-    depot: FloatArray | None,
-) -> np.ndarray:
-    """Per stop, the try of least finite ``value`` that passes every check (-1: none).
-
-    The tries are checked best first, all stops at once, and a stop leaves once one of its
-    tries passes: the same pick as checking them all, with most tries never checked."""
-    rank = np.argsort(value, axis=1, kind="stable")
-    pick = np.full(len(value), -1, dtype=np.int64)
-    pending = np.arange(len(value))
-    for r in range(value.shape[1]):
-        ti = rank[pending, r]
-        live = np.isfinite(value[pending, ti])
-        pending, ti = pending[live], ti[live]
-        if pending.size == 0:
-            break
-        ok = _feasible(
-            site,
-            cand[pending, ti],
-            sees[pending],
-            None if heading is None else heading[k[pending]],
-            a[pending],
-            b[pending],
-            depot,
-        )
-        pick[pending[ok]] = ti[ok]
-        pending = pending[~ok]
-    return pick
 
 
 def _two_opt(
