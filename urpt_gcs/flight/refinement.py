@@ -134,23 +134,29 @@ def _feasible(
     """Which candidate stops (each with its row of targets to see, its heading and its
     neighbours ``a``, ``b``) pass every check of a move. With a depot the leg straight home
     is checked too: a flight cut into sorties may fly it."""
-    n = len(cand)
-    ok = np.ones(n, dtype=bool)
-    cam = site.camera
-    # Legs first: they are the cheapest to refuse.
-    starts, ends = [a, cand], [cand, b]
-    if depot is not None:
-        starts.append(cand)
-        ends.append(np.tile(depot, (n, 1)))
+    # The short legs to the neighbours first, then what the stop sees, and the long leg
+    # home last, only for the stops that passed the rest: the check is the same, the
+    # segments walked fewer.
+    ok = _legs_clear(site, [a, cand], [cand, b])
+    ok &= _sees_all(site, cand, sees & ok[:, None], heading)
+    if depot is not None and ok.any():
+        ok[ok] = _legs_clear(site, [cand[ok]], [np.tile(depot, (int(ok.sum()), 1))])
+    return ok
+
+
+def _legs_clear(site: Site, starts: list[FloatArray], ends: list[FloatArray]) -> BoolArray:
+    """Per stop, whether its legs (``starts[j][i]`` to ``ends[j][i]`` for every ``j``) keep
+    the clearance over terrain that is read."""
+    n = len(starts[0])
     if site.fill is not None:
         site.fill(np.vstack(starts), np.vstack(ends))
-    h = np.full(len(starts) * n, cam.altitude_m)
+    h = np.full(len(starts) * n, site.camera.altitude_m)
     start = np.column_stack([np.vstack(starts), h])
     end = np.column_stack([np.vstack(ends), h])
     prof = segment_profile(site.terrain, start, end, site.workers)
     legs_ok = (prof.unknown_fraction == 0.0) & (prof.excess_m <= -site.min_clearance_m)
-    ok &= legs_ok.reshape(len(starts), n).all(axis=0)
-    return ok & _sees_all(site, cand, sees & ok[:, None], heading)
+    out: BoolArray = legs_ok.reshape(len(starts), n).all(axis=0)
+    return out
 
 
 def _sees_all(
