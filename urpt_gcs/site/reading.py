@@ -463,7 +463,11 @@ def fill_along(info: DemInfo, terrain: Terrain, start_xy: FloatArray, end_xy: Fl
     # so every cell a segment's surface depends on lies in some sample's box.
     steps = np.maximum(np.ceil(np.hypot(cb - ca, rb - ra) / _STEP_PX), 1).astype(np.int64)
     k = np.repeat(np.arange(len(a)), steps + 1)
-    t = np.concatenate([np.linspace(0.0, 1.0, n + 1) for n in steps.tolist()])
+    # 0, 1/n, ..., 1 along each segment of n steps, all segments at once.
+    first = np.cumsum(steps + 1) - (steps + 1)
+    j = np.arange(k.size) - first[k]
+    t = j * (1.0 / steps[k])
+    t[j == steps[k]] = 1.0
     cols = ca[k] + t * (cb - ca)[k]
     rows = ra[k] + t * (rb - ra)[k]
     keep = np.isfinite(cols) & np.isfinite(rows)
