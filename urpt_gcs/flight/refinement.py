@@ -410,20 +410,24 @@ def _pattern_search(
             new = np.hypot(*(cand - a[:, None]).transpose(2, 0, 1)) + np.hypot(
                 *(cand - b[:, None]).transpose(2, 0, 1)
             )
-            better = new < old[:, None] - _MIN_GAIN_M
-            si, ti = np.nonzero(better)
-            ok = np.zeros(better.shape, dtype=bool)
-            if si.size:
-                ok[si, ti] = _feasible(
-                    site,
-                    cand[si, ti],
-                    sees[k[si]],
-                    None if heading is None else heading[k[si]],
-                    a[si],
-                    b[si],
-                    depot,
-                )
-            value = np.where(ok, new, np.inf)
+            value = np.where(new < old[:, None] - _MIN_GAIN_M, new, np.inf)
+            # Each stop's best try first, all stops at once; the rest only where it fails:
+            # the same pick as checking them all, most of the checks saved.
+            ok = np.zeros(value.shape, dtype=bool)
+            for batch in _best_then_rest(value):
+                found = np.any(ok, axis=1, keepdims=True)
+                si, ti = np.nonzero(batch & ~found)
+                if si.size:
+                    ok[si, ti] = _feasible(
+                        site,
+                        cand[si, ti],
+                        sees[k[si]],
+                        None if heading is None else heading[k[si]],
+                        a[si],
+                        b[si],
+                        depot,
+                    )
+            value = np.where(ok, value, np.inf)
             pick = value.argmin(axis=1)
             moved = np.isfinite(value[np.arange(k.size), pick])
             for j in np.flatnonzero(moved):
@@ -435,6 +439,15 @@ def _pattern_search(
         if gained <= 1e-9 * max(before, 1.0) and bool(np.all(step < _LAST_STEP_M)):
             break
     return moves, sweeps
+
+
+def _best_then_rest(value: FloatArray) -> tuple[BoolArray, BoolArray]:
+    """Two masks of the finite tries: each row's least, then the others."""
+    finite = np.isfinite(value)
+    best = np.zeros_like(finite)
+    rows = np.flatnonzero(finite.any(axis=1))
+    best[rows, value[rows].argmin(axis=1)] = True
+    return best, finite & ~best
 
 
 def _two_opt(
