@@ -68,6 +68,27 @@ _ROUNDING = 1e-9
 
 
 @nb.njit(cache=True)
+def _edge(
+    u: int,
+    i: int,
+    stamp: I64,
+    slot: I64,
+    nw: FloatArray,
+    cx: FloatArray,
+    cy: FloatArray,
+    cr: FloatArray,
+    mu: FloatArray,
+    amin: I64,
+) -> tuple[float, int]:
+    """The weighted edge from region ``u`` to ``i`` and its near-list entry (-1: far, the
+    circles' gap with each side's least multiplier), with ``u``'s near list stamped."""
+    if stamp[i] == u:
+        return nw[slot[i]], slot[i]
+    d = math.hypot(cx[u] - cx[i], cy[u] - cy[i]) - cr[u] - cr[i]
+    return max(d, 0.0) + mu[amin[u]] + mu[amin[i]], -1
+
+
+@nb.njit(cache=True)
 def _round(
     start: I64,
     mx: FloatArray,
@@ -144,13 +165,7 @@ def _round(
         for i in range(m):
             if done[i]:
                 continue
-            if stamp[i] == u:
-                v = nw[slot[i]]
-                kk = slot[i]
-            else:
-                d = math.hypot(cx[u] - cx[i], cy[u] - cy[i]) - cr[u] - cr[i]
-                v = max(d, 0.0) + mu[amin[u]] + mu[amin[i]]
-                kk = -1
+            v, kk = _edge(u, i, stamp, slot, nw, cx, cy, cr, mu, amin)
             if v < key[i]:
                 key[i] = v
                 parent[i] = u
@@ -167,13 +182,7 @@ def _round(
     b1, b2 = np.inf, np.inf
     i1, i2, k1, k2 = -1, -1, -1, -1
     for i in range(s):
-        if stamp[i] == s:
-            v = nw[slot[i]]
-            kk = slot[i]
-        else:
-            d = math.hypot(cx[s] - cx[i], cy[s] - cy[i]) - cr[s] - cr[i]
-            v = max(d, 0.0) + mu[amin[s]] + mu[amin[i]]
-            kk = -1
+        v, kk = _edge(s, i, stamp, slot, nw, cx, cy, cr, mu, amin)
         if v < b1:
             b2, i2, k2 = b1, i1, k1
             b1, i1, k1 = v, i, kk
