@@ -612,15 +612,20 @@ def subset_bound(
     regions: RegionSet, upper: float, time_limit_s: float, gap_target: float = 1e-4
 ) -> Bound:
     """The relaxed optimum over a few regions far apart: every tour enters those too."""
-    chosen = spread_subset(regions, EXACT_MAX_REGIONS)
-    sub = RegionSet(
+    sub = _subset(regions, spread_subset(regions, EXACT_MAX_REGIONS))
+    return lower_bound(sub, upper, time_limit_s, gap_target, method="pieces")
+
+
+def _subset(regions: RegionSet, chosen: list[int]) -> RegionSet:
+    """The regions ``chosen`` (none holding the depot), with the same depot."""
+    return RegionSet(
         discs=None if regions.discs is None else regions.discs[chosen],
         polygons=None if regions.polygons is None else tuple(regions.polygons[i] for i in chosen),
         depot_xy=regions.depot_xy,
         outer=tuple(regions.outer[i] for i in chosen),
         depot_inside=tuple(False for _ in chosen),
+        name=regions.name,
     )
-    return lower_bound(sub, upper, time_limit_s, gap_target, method="pieces")
 
 
 def _all_regions(
@@ -642,16 +647,7 @@ def _all_regions(
     found = Bound(min(value, upper), f"one-tree over all {kept}", rounds, pieces.n, 0.0)
     if method == "auto" and upper - value > gap_target * value:
         chosen = sorted(spread_subset(regions, ORDER_MAX_REGIONS))
-        sub = RegionSet(
-            discs=None if regions.discs is None else regions.discs[chosen],
-            polygons=None
-            if regions.polygons is None
-            else tuple(regions.polygons[i] for i in chosen),
-            depot_xy=regions.depot_xy,
-            outer=tuple(regions.outer[i] for i in chosen),
-            depot_inside=tuple(False for _ in chosen),
-            name=regions.name,
-        )
+        sub = _subset(regions, chosen)
         left = max(time_limit_s - (time.perf_counter() - started), 0.0)
         order = _order(sub, upper, left, gap_target, exact_shapes)
         if order.value > found.value:
