@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from support.sortie_brute import best_partition, parts, sortie_time, subsets
 
 import urpt_gcs.bound.sorties as sorties_module
 from urpt_gcs.bound.sorties import SortieBound, SortieBudget, sortie_bound, star_distances
@@ -31,71 +32,17 @@ def _model() -> FlightModel:
 
 
 def _sortie_time(model: FlightModel, seq_xy: np.ndarray) -> float:
-    """Flight time of one sortie from home through ``seq_xy`` in order and back, from the
-    model's primitives: take-off, a cruise leg to every stop, a stop at each, the leg home at
-    the return speed, landing."""
-    path = [HOME, *[(float(x), float(y)) for x, y in seq_xy], HOME]
-    legs = [math.dist(a, b) for a, b in itertools.pairwise(path)]
-    t = model.takeoff_s(ALT_M)
-    for leg in legs[:-1]:
-        t += float(model.leg_s(leg))
-    t += len(seq_xy) * model.stop_s
-    t += float(model.return_s(legs[-1]))
-    return t + model.landing_s(ALT_M)
+    return sortie_time(model, seq_xy, HOME, ALT_M)
 
 
 def _subsets(
     points: np.ndarray, model: FlightModel, endurance_s: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per subset of the points (a bitmask): the shortest and the quickest sortie through
-    exactly them within the endurance (inf when none fits), and the quickest at all."""
-    n = len(points)
-    home = np.asarray(HOME)
-    to_home = np.hypot(*(points - home).T)
-    gap = np.hypot(*(points[:, None, :] - points[None, :, :]).transpose(2, 0, 1))
-    out_s = model.leg_s(to_home)
-    back_s = model.return_s(to_home)
-    hop_s = model.leg_s(gap)
-    ends = model.takeoff_s(ALT_M) + model.landing_s(ALT_M)
-    short = np.full(1 << n, np.inf)
-    quick = np.full(1 << n, np.inf)
-    fastest = np.full(1 << n, np.inf)
-    short[0] = quick[0] = fastest[0] = 0.0
-    for k in range(1, n + 1):
-        for seq in itertools.permutations(range(n), k):
-            mask = sum(1 << i for i in seq)
-            length = float(to_home[seq[0]] + to_home[seq[-1]])
-            time_s = float(ends + out_s[seq[0]] + back_s[seq[-1]] + k * model.stop_s)
-            for a, b in itertools.pairwise(seq):
-                length += float(gap[a, b])
-                time_s += float(hop_s[a, b])
-            fastest[mask] = min(fastest[mask], time_s)
-            if time_s <= endurance_s:
-                short[mask] = min(short[mask], length)
-                quick[mask] = min(quick[mask], time_s)
-    return short, quick, fastest
+    return subsets(points, model, endurance_s, HOME, ALT_M)
 
 
-def _parts(mask: int) -> list[int]:
-    """Every submask of ``mask`` that holds its lowest point (one part of a partition)."""
-    low = mask & -mask
-    rest = mask ^ low
-    out = []
-    sub = rest
-    while True:
-        out.append(sub | low)
-        if sub == 0:
-            return out
-        sub = (sub - 1) & rest
-
-
-def _best_partition(cost: np.ndarray, n: int) -> float:
-    """The least total cost of a partition of all ``n`` points into parts."""
-    best = np.full(1 << n, np.inf)
-    best[0] = 0.0
-    for mask in range(1, 1 << n):
-        best[mask] = min(cost[p] + best[mask ^ p] for p in _parts(mask))
-    return float(best[-1])
+_parts = parts
+_best_partition = best_partition
 
 
 def _tightest(fastest: np.ndarray, n: int, parts: int) -> float:

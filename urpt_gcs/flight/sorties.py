@@ -1,16 +1,18 @@
-"""Sortie order: reorder the stops for the flight as it is cut into sorties.
+"""Sorties: which stops fly in which sortie, and in what order.
 
 The solver minimises one closed tour. When that tour does not fit ``--endurance`` it is cut
 into sorties (:func:`urpt_gcs.problem.flight_time.split_sorties`), and the order that is
 shortest in one piece is seldom the one that cuts best: each sortie flies out from home and
-back. This stage starts from the solver's order and improves it for the objective actually
-flown, the total flight time of the optimal cut of the order (the cut-point DP of
-``split_sorties``, compiled here), with 2-opt and Or-opt moves between stops near each other
-and moves of the tour's ends.
-Which viewpoint serves each target stays the solver's choice.
+back. This stage improves what is flown, the total flight time of the sorties, in two steps:
 
-This is a stop-gap on the way to DESIGN's joint planning of several closed tours: it fixes
-what is flown, not how the sorties are chosen.
+1. the order: from the solver's order, 2-opt and Or-opt moves between stops near each other
+   and moves of the tour's ends, each order timed by its optimal cut (the cut-point DP of
+   ``split_sorties``, compiled here);
+2. the sorties themselves (:func:`urpt_gcs.solvers.sortie_routes.search_routes`), from that
+   order's cut: stops moved between sorties, tails exchanged, ruin and recreate.
+
+The stops are the solver's, with their margins and refinement; which viewpoint serves each
+target is not chosen again here.
 """
 
 from __future__ import annotations
@@ -26,18 +28,22 @@ from scipy.spatial import cKDTree
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
 from urpt_gcs.solvers import Tour
+from urpt_gcs.solvers.sortie_routes import RouteSearch, search_routes
 
 __all__ = [
     "NEIGHBOURS",
+    "ORDER_SHARE",
     "SEARCH_SHARE",
     "SEGMENT_MAX",
     "SortieOrder",
     "order_sorties",
 ]
 
-# The share of --time-limit the search may spend (on top of the solve), and how many of each
-# stop's nearest stops its moves look at.
+# The share of --time-limit the search may spend (on top of the solve), the share of that
+# the order search may take before the sorties are searched as routes, and how many of each
+# stop's nearest stops the order's moves look at.
 SEARCH_SHARE = 0.2
+ORDER_SHARE = 0.25
 NEIGHBOURS = 8
 # Or-opt moves segments of up to this many stops.
 SEGMENT_MAX = 3
@@ -54,10 +60,14 @@ class SortieOrder:
         The solver's tour in one piece, before the search.
     plain_cut_sorties, plain_cut_length_m, plain_cut_flight_time_s
         The solver's order cut into sorties as it is: how many, and their totals.
+    order_flight_time_s
+        The searched order's optimal cut, before the route search (total).
     length_m, flight_time_s
-        The searched order's sorties, as flown (total).
+        The sorties found, as flown (total).
     moves
-        Improving moves accepted.
+        Improving moves of the order accepted.
+    routes
+        What the route search did.
     search_s
         Time spent searching; at most ``budget_s`` (one move's evaluation more).
     budget_s
@@ -68,9 +78,11 @@ class SortieOrder:
     plain_cut_sorties: int
     plain_cut_length_m: float
     plain_cut_flight_time_s: float
+    order_flight_time_s: float
     length_m: float
     flight_time_s: float
     moves: int
+    routes: RouteSearch
     search_s: float
     budget_s: float
 
@@ -239,11 +251,25 @@ def order_sorties(
                     moves += 1
                     improved = True
                     break
-                if time.perf_counter() - start > budget_s:
+                if time.perf_counter() - start > ORDER_SHARE * budget_s:
                     out_of_time = True
                     break
             if out_of_time:
                 break
+    searched = split_sorties(
+        xy[order], home_xy, altitude_rel_m, model, endurance_s, [names[i] for i in order.tolist()]
+    )
+    routes, route_search = search_routes(
+        xy,
+        home_xy,
+        altitude_rel_m,
+        model,
+        endurance_s,
+        [order[s.first : s.stop] for s in searched],
+        budget_s - (time.perf_counter() - start),
+        seed,
+    )
+    order = np.concatenate(_by_bearing(routes, xy, home_xy))
     cut = split_sorties(
         xy[order], home_xy, altitude_rel_m, model, endurance_s, [names[i] for i in order.tolist()]
     )
@@ -252,9 +278,11 @@ def order_sorties(
         plain_cut_sorties=len(plain),
         plain_cut_length_m=_total_length(plain),
         plain_cut_flight_time_s=_total_time(plain),
+        order_flight_time_s=_total_time(searched),
         length_m=_total_length(cut),
         flight_time_s=_total_time(cut),
         moves=moves,
+        routes=route_search,
         search_s=time.perf_counter() - start,
         budget_s=budget_s,
     )
@@ -272,10 +300,22 @@ def order_sorties(
         notes=(
             *tour.notes,
             f"stops reordered for sorties: {found.plain_cut_flight_time_s / 60:.1f} -> "
-            f"{found.flight_time_s / 60:.1f} min in {moves} moves",
+            f"{found.flight_time_s / 60:.1f} min ({found.order_flight_time_s / 60:.1f} min "
+            f"after {moves} moves of the order, then {route_search.rounds} rounds over "
+            f"{route_search.sorties} sorties)",
         ),
     )
     return reordered, found
+
+
+def _by_bearing(
+    routes: list[IntArray], xy: FloatArray, home_xy: tuple[float, float]
+) -> list[IntArray]:
+    """The sorties in the order of the bearing from home of their stops' middle, so that the
+    operator flies them round the site."""
+    home = np.asarray(home_xy)
+    angle = [math.atan2(*(xy[r].mean(axis=0) - home)[::-1]) for r in routes]
+    return [routes[i] for i in np.argsort(angle, kind="stable").tolist()]
 
 
 def _total_length(sorties: tuple[Sortie, ...]) -> float:
