@@ -393,3 +393,33 @@ def test_sortie_order_never_flies_longer_than_the_plain_cut(seed: int) -> None:
         (i,) = np.flatnonzero((stops == point).all(axis=1))
         assert (searched.sees[k] == tour.sees[i]).all()
         assert searched.order[k] == tour.order[i]
+
+
+def test_searched_sorties_that_fail_a_check_fall_back_to_the_tours_order(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The sortie search joins stops the solver never joined; when the flight it found fails
+    a check (here: made to fail), the plan flies the tour's own order, checked, and says so."""
+    import urpt_gcs.pipeline.missions as missions
+
+    real = missions._write_missions
+    calls: list[Tour] = []
+
+    def failing_first(site: Any, area: Any, tour: Tour, settings: Any) -> Any:
+        calls.append(tour)
+        if len(calls) == 1:
+            raise PlanError("leg 3 (stop 2 -> stop 9) cuts 1.0 m into the terrain")
+        return real(site, area, tour, settings)
+
+    monkeypatch.setattr(missions, "_write_missions", failing_first)
+    settings = PlanSettings(solve=FAST, endurance_min=SORTIE_ENDURANCE_MIN, certify=False)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    assert len(calls) == 2
+    assert calls[0].points_xy is not None and calls[1].points_xy is not None
+    changed = not np.array_equal(calls[0].points_xy, calls[1].points_xy)
+    assert changed, "the search changed nothing: no fallback tested"
+    assert result.sortie_order is None
+    assert any("the tour's own order is flown" in w for w in result.warnings)
+    assert result.tour.points_xy is not None
+    np.testing.assert_array_equal(result.tour.points_xy, calls[1].points_xy)
+    assert len(result.sorties) >= 2

@@ -94,7 +94,7 @@ def sorties_and_missions(
     endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
     budget = SEARCH_SHARE * settings.solve.time_limit_s
     stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
-    tour, sortie_order = order_sorties(
+    searched, sortie_order = order_sorties(
         tour,
         site.home_xy,
         altitude_rel(area),
@@ -106,9 +106,20 @@ def sorties_and_missions(
     )
     stages.lap("sorties")
     stages.say("checking the missions")
-    flight = _write_missions(site, area, tour, settings)
+    try:
+        flight = _write_missions(site, area, searched, settings)
+    except PlanError as exc:
+        if sortie_order is None:
+            raise
+        # The search joins stops that the solver's tour never joined, and only the checks
+        # read the terrain under those legs: when one fails, the solver's order is flown.
+        flight = _write_missions(site, area, tour, settings)
+        flight.warnings.append(
+            f"the sorties searched failed a check ({exc}); the tour's own order is flown"
+        )
+        searched, sortie_order = tour, None
     stages.lap("checks")
-    return tour, sortie_order, flight
+    return searched, sortie_order, flight
 
 
 def _write_missions(
