@@ -5,6 +5,7 @@ order of each)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -99,3 +100,50 @@ def test_the_start_comes_back_when_nothing_is_found() -> None:
     found, report = search_routes(xy, HOME, ALT_M, model, endurance, start, 0.1, 0)
     assert [r.tolist() for r in found] == [[0], [1], [2]]
     assert report.flight_time_s == report.start_s
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_given_leg_times_are_what_is_searched(seed: int) -> None:
+    """Legs timed by the caller (a flight that climbs over terrain): a detour made slow on
+    purpose is avoided, the result is the brute-force optimum over those times, and a leg left
+    untimed (inf) is never flown."""
+    rng = np.random.default_rng(100 + seed)
+    n = 6
+    xy = rng.uniform(-300.0, 300.0, (n, 2))
+    model = _model()
+    pts = np.vstack([xy, [HOME]])
+    gap = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+    legs = np.asarray(model.leg_s(gap), dtype=np.float64)
+    # A ridge between stops 0 and 1 and between 2 and home: climbing over takes a minute.
+    legs[0, 1] = legs[1, 0] = legs[0, 1] + 60.0
+    legs[2, n] = legs[n, 2] = legs[2, n] + 60.0
+    legs[3, 4] = legs[4, 3] = np.inf  # not timed
+
+    def time_of(route: list[int]) -> float:
+        visits = [n, *route, n]
+        t = model.takeoff_s(ALT_M) + model.landing_s(ALT_M) + len(route) * model.stop_s
+        return t + sum(float(legs[a, b]) for a, b in itertools.pairwise(visits))
+
+    quick = np.full(1 << n, np.inf)
+    quick[0] = 0.0
+    alone = max(time_of([i]) for i in range(n))
+    endurance = alone + 0.4 * (time_of(list(range(n))) - alone)
+    for size in range(1, n + 1):
+        for seq in itertools.permutations(range(n), size):
+            t = time_of(list(seq))
+            if t <= endurance:
+                mask = sum(1 << i for i in seq)
+                quick[mask] = min(quick[mask], t)
+    optimum = best_partition(quick, n)
+    start = [np.array([i]) for i in range(n)]
+    found, report = search_routes(
+        xy, HOME, ALT_M, model, endurance, start, 0.3, seed, leg_times=legs
+    )
+    total = math.fsum(time_of(r.tolist()) for r in found)
+    assert sorted(np.concatenate(found).tolist()) == list(range(n))
+    assert max(time_of(r.tolist()) for r in found) <= endurance + 1e-9
+    assert report.flight_time_s == pytest.approx(total, abs=1e-6)
+    assert total == pytest.approx(optimum, rel=1e-9)
+    for r in found:
+        pairs = set(itertools.pairwise(r.tolist()))
+        assert (3, 4) not in pairs and (4, 3) not in pairs

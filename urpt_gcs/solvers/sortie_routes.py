@@ -17,10 +17,12 @@ tour's order cut at its best cut points) and never returns worse ones:
   run again around them, and the result kept when the total time falls. A whole sortie
   emptied this way saves its take-off and landing.
 
-Legs between stops are timed from a table of the model's short-leg times (linear between
-samples; every leg long enough to reach the cruise speed is timed exactly). The routes found
-are timed again exactly by the model before they are returned, and given back unchanged if
-they are not shorter or any leaves the endurance.
+Level legs between stops are timed from a table of the model's short-leg times (linear
+between samples; every leg long enough to reach the cruise speed is timed exactly), and the
+routes found timed again exactly by the model before they are returned. A flight that follows
+the terrain gives its legs' times instead (``leg_times``: each leg as flown, climbs and
+descents included; a pair it does not time is never joined). Either way the routes are given
+back unchanged if they are not quicker or any leaves the endurance.
 """
 
 from __future__ import annotations
@@ -102,12 +104,23 @@ def route_times(
     altitude_rel_m: float,
     model: FlightModel,
     routes: list[IntArray],
+    leg_times: FloatArray | None = None,
 ) -> FloatArray:
-    """Each route's flight time, exactly as the model times a sortie of those stops."""
-    home = np.asarray(home_xy, dtype=np.float64)
+    """Each route's flight time: exactly as the model times a sortie of level legs through
+    those stops, or from ``leg_times`` (see :func:`search_routes`) with the model's take-off,
+    stops and landing."""
     out = np.empty(len(routes))
+    if leg_times is not None:
+        home = len(stops_xy)
+        ends = model.takeoff_s(altitude_rel_m) + model.landing_s(altitude_rel_m)
+        for r, stops in enumerate(routes):
+            visits = [home, *(int(v) for v in stops), home]
+            legs = [float(leg_times[a, b]) for a, b in itertools.pairwise(visits)]
+            out[r] = ends + math.fsum(legs) + len(stops) * model.stop_s
+        return out
+    home_xy_arr = np.asarray(home_xy, dtype=np.float64)
     for r, stops in enumerate(routes):
-        path = np.vstack([home, stops_xy[stops], home])
+        path = np.vstack([home_xy_arr, stops_xy[stops], home_xy_arr])
         out[r] = model.sortie_s(np.hypot(*np.diff(path, axis=0).T), altitude_rel_m)
     return out
 
@@ -121,6 +134,7 @@ def search_routes(
     routes: list[IntArray],
     budget_s: float,
     seed: int = 0,
+    leg_times: FloatArray | None = None,
 ) -> tuple[list[IntArray], RouteSearch]:
     """Improve sorties over fixed stops for the least total flight time.
 
@@ -141,6 +155,10 @@ def search_routes(
         instances only when ruin and recreate finds nothing, so it usually takes all of it).
     seed
         Seed of the ruin-and-recreate choices.
+    leg_times
+        When the legs are not level: (k + 1, k + 1) seconds, row and column ``k`` home, each
+        leg's time from rest to rest as flown (its stop aside); inf where a leg is not
+        timed. ``altitude_rel_m`` then gives the take-off's and landing's height.
 
     Returns
     -------
@@ -151,7 +169,7 @@ def search_routes(
     start = time.perf_counter()
     xy = np.ascontiguousarray(stops_xy, dtype=np.float64)
     k = len(xy)
-    start_times = route_times(xy, home_xy, altitude_rel_m, model, routes)
+    start_times = route_times(xy, home_xy, altitude_rel_m, model, routes, leg_times)
     start_total = math.fsum(start_times.tolist())
 
     def result(
@@ -168,7 +186,9 @@ def search_routes(
 
     if k < 2:
         return routes, result(routes, start_total, 0)[1]
-    links, times, near, leg = _prepare(xy, home_xy, altitude_rel_m, model, endurance_s, routes)
+    links, times, near, leg = _prepare(
+        xy, home_xy, altitude_rel_m, model, endurance_s, routes, leg_times
+    )
     _local_search(near, np.ones(k, dtype=np.bool_), links, times, leg)
     rounds = 0
     rng = np.random.default_rng(seed)
@@ -176,7 +196,7 @@ def search_routes(
         _ruin_and_recreate(near, _ROUNDS_PER_CALL, rng, links, times, leg)
         rounds += _ROUNDS_PER_CALL
     found = _routes(links)
-    exact = route_times(xy, home_xy, altitude_rel_m, model, found)
+    exact = route_times(xy, home_xy, altitude_rel_m, model, found, leg_times)
     total = math.fsum(exact.tolist())
     if total >= start_total or float(exact.max()) > endurance_s:
         return result(routes, start_total, rounds)
@@ -190,12 +210,15 @@ def warm_up() -> None:
     xy = np.random.default_rng(0).random((6, 2)) * 100.0
     model = FlightModel.arducopter(cruise_m_s=10.0, hold_s=1.0)
     routes = [np.arange(3), np.arange(3, 6)]
-    links, times, near, leg = _prepare(xy, (50.0, 50.0), 30.0, model, 1e6, routes)
-    _local_search(near, np.ones(6, dtype=np.bool_), links, times, leg)
-    _ruin_and_recreate(near, 1, np.random.default_rng(0), links, times, leg)
+    level = _prepare(xy, (50.0, 50.0), 30.0, model, 1e6, routes)
+    gap = np.hypot(*(np.vstack([xy, [50.0, 50.0]])[:, None] - np.vstack([xy, [50.0, 50.0]])).T)
+    timed = _prepare(xy, (50.0, 50.0), 30.0, model, 1e6, routes, model.leg_s(gap))
+    for links, times, near, leg in (level, timed):
+        _local_search(near, np.ones(6, dtype=np.bool_), links, times, leg)
+        _ruin_and_recreate(near, 1, np.random.default_rng(0), links, times, leg)
 
 
-Legs = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+Legs = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
 def _prepare(
@@ -205,10 +228,12 @@ def _prepare(
     model: FlightModel,
     endurance_s: float,
     routes: list[IntArray],
+    leg_times: FloatArray | None = None,
 ) -> tuple[IntArray, FloatArray, IntArray, Legs]:
     """The routes as the kernels hold them (linked, and timed), each stop's nearest stops,
     and what the kernels time legs with: the stops, their legs from and to home, the
-    scalars and the short-leg table."""
+    scalars, the short-leg table and the legs' times between stops when given (else
+    empty)."""
     k = len(xy)
     to_home = np.hypot(*(xy - np.asarray(home_xy, dtype=np.float64)).T)
     short_m, over_s = model.cruise_overhead()
@@ -224,9 +249,20 @@ def _prepare(
         ]
     )
     table = np.asarray(model.leg_s(np.linspace(0.0, short_m, LEG_SAMPLES)), dtype=np.float64)
-    home_s = np.vstack([model.leg_s(to_home), model.return_s(to_home)]).astype(np.float64)
-    _, idx = cKDTree(xy).query(xy, k=min(NEIGHBOURS + 1, k))
-    near = np.ascontiguousarray(np.asarray(idx).reshape(k, -1)[:, 1:], dtype=np.int64)
+    if leg_times is None:
+        home_s = np.vstack([model.leg_s(to_home), model.return_s(to_home)]).astype(np.float64)
+        _, idx = cKDTree(xy).query(xy, k=min(NEIGHBOURS + 1, k))
+        near = np.ascontiguousarray(np.asarray(idx).reshape(k, -1)[:, 1:], dtype=np.int64)
+        dense = np.zeros((0, 0))
+    else:
+        home_s = np.ascontiguousarray(np.vstack([leg_times[k, :k], leg_times[:k, k]]))
+        dense = np.ascontiguousarray(leg_times[:k, :k], dtype=np.float64)
+        # The quickest legs out of each stop (itself last: its own entry is taken as inf).
+        own = dense.copy()
+        np.fill_diagonal(own, np.inf)
+        near = np.ascontiguousarray(
+            np.argsort(own, axis=1, kind="stable")[:, : min(NEIGHBOURS, k - 1)], dtype=np.int64
+        )
     links = np.full((7, k), -1, dtype=np.int64)
     links[_POS] = 0
     links[_SIZE] = 0
@@ -237,7 +273,7 @@ def _prepare(
             links[_NXT, a] = b
             links[_PRV, b] = a
     times = np.zeros((3, k))
-    leg = (xy, home_s, par, table)
+    leg = (xy, home_s, par, table, dense)
     for r in range(len(routes)):
         _retime(r, links, times, leg)
     return links, times, near, leg
@@ -260,11 +296,13 @@ def _routes(links: IntArray) -> list[IntArray]:
 def _cost(x, y, leg):  # type: ignore[no-untyped-def]
     """Time of the leg from ``x`` to ``y`` (-1 is home: out at the cruise speed, back at the
     return speed)."""
-    xy, home_s, par, table = leg
+    xy, home_s, par, table, dense = leg
     if x < 0:
         return home_s[_OUT, y]
     if y < 0:
         return home_s[_BACK, x]
+    if dense.shape[0] > 0:
+        return dense[x, y]
     d = math.hypot(xy[x, 0] - xy[y, 0], xy[x, 1] - xy[y, 1])
     short = par[_SHORT]
     if d >= short:
