@@ -104,9 +104,9 @@ def test_the_start_comes_back_when_nothing_is_found() -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_given_leg_times_are_what_is_searched(seed: int) -> None:
-    """Legs timed by the caller (a flight that climbs over terrain): a detour made slow on
-    purpose is avoided, the result is the brute-force optimum over those times, and a leg left
-    untimed (inf) is never flown."""
+    """Legs timed by the caller (a flight that climbs over terrain, slower one way than the
+    other): a detour made slow on purpose is avoided, the result is the brute-force optimum
+    over those times, and a leg left untimed (inf) is never flown."""
     rng = np.random.default_rng(100 + seed)
     n = 6
     xy = rng.uniform(-300.0, 300.0, (n, 2))
@@ -114,7 +114,11 @@ def test_given_leg_times_are_what_is_searched(seed: int) -> None:
     pts = np.vstack([xy, [HOME]])
     gap = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
     legs = np.asarray(model.leg_s(gap), dtype=np.float64)
-    # A ridge between stops 0 and 1 and between 2 and home: climbing over takes a minute.
+    # The ground rises to the east: eastward legs climb and take longer than westward ones
+    # (the legs are not the same both ways). A ridge between stops 0 and 1 and between 2 and
+    # home: climbing over takes a minute.
+    east = pts[:, 0][None, :] > pts[:, 0][:, None]
+    legs = np.where(east, 1.4 * legs, legs)
     legs[0, 1] = legs[1, 0] = legs[0, 1] + 60.0
     legs[2, n] = legs[n, 2] = legs[2, n] + 60.0
     legs[3, 4] = legs[4, 3] = np.inf  # not timed

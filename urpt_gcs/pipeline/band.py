@@ -9,15 +9,16 @@ by the band:
    of the flight model) between straight legs -- the solver core sees points, cover sets
    and a table of times;
 3. every leg made to follow the terrain inside the band, waypoints without a photo inserted
-   where a straight leg would leave it (:mod:`urpt_gcs.flight.band`), cut into sorties by
-   flight time, written as missions whose waypoints each carry their own height above home,
-   and checked as written;
+   where a straight leg would leave it (:mod:`urpt_gcs.flight.band`); the sorties searched
+   over those legs' times (:func:`urpt_gcs.solvers.sortie_routes.search_routes`), written as
+   missions whose waypoints each carry their own height above home, and checked as written;
 4. the certificate: a lower bound of the horizontal length of any flight in the band that
    sees every target, and from it a lower bound of the flight time.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -34,6 +35,7 @@ from urpt_gcs.flight.band_refine import BandStops, refine_band_stops
 from urpt_gcs.flight.follow import path_in_band
 from urpt_gcs.flight.mission import GeoPoint, Mission, build_mission
 from urpt_gcs.flight.safety import Leg, geofence_polygon
+from urpt_gcs.flight.sorties import SEARCH_SHARE
 from urpt_gcs.memory import require_memory
 from urpt_gcs.pipeline.area import PlanArea, SiteInputs, latlon_to_xy, site_fields, xy_to_latlon
 from urpt_gcs.pipeline.missions import flight_model
@@ -46,6 +48,7 @@ from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.reading import fill_along
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
+from urpt_gcs.solvers.sortie_routes import NEIGHBOURS, search_routes
 from urpt_gcs.visibility.band import BandViewpoints, band_levels, band_viewpoints, sees_from
 from urpt_gcs.visibility.band_outer import BandOuter, band_outer
 
@@ -58,6 +61,9 @@ MAX_BAND_VIEWPOINTS = 4000
 _NEAR_COUNT = 300
 # Heights are written in whole centimetres.
 _CM = 100.0
+# Up to this many stops the sortie search may join any two (every leg between them is
+# followed and timed); above it, each stop only to its nearest.
+_ALL_PAIRS_MAX = 80
 
 
 def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stages: Stages) -> Plan:
@@ -112,9 +118,18 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
     stages.lap("costs")
     tour = solve_stage(instance, settings, stages)
     order = np.asarray(tour.order, dtype=np.int64)
+    stages.say("following the terrain between the stops")
+    home_sorties = _HomeSorties(site, area, band, model, home_xyz, takeoff_m)
+    perm = home_sorties.search(views.xyz[order], settings)
+    order = order[perm]
+    tour = dataclasses.replace(
+        tour,
+        order=tuple(order.tolist()),
+        sees=tour.sees[perm],
+        points_xy=None if tour.points_xy is None else tour.points_xy[perm],
+    )
     stops = views.xyz[order]
     headings = None if views.heading_deg is None else views.heading_deg[order]
-    stages.say("following the terrain between the stops")
     flight = _fly(site, area, band, model, settings, stops, home_xyz, takeoff_m, tour, headings)
     stages.lap("sorties")
     unrefined_s = sum(x.flight_time_s for x in flight.sorties)
@@ -379,6 +394,82 @@ def _follow(
     fill_along(site.dem, terrain, a[None, :2], b[None, :2])
     path, _ = path_in_band(terrain, np.vstack([a, b]), band)
     return path
+
+
+class _HomeSorties:
+    """The sorties searched over the legs as the band flies them."""
+
+    def __init__(
+        self,
+        site: SiteInputs,
+        area: PlanArea,
+        band: FlightBand,
+        model: FlightModel,
+        home_xyz: FloatArray,
+        takeoff_m: float,
+    ) -> None:
+        self.site, self.area, self.band, self.model = site, area, band, model
+        self.home_xyz, self.takeoff_m = home_xyz, takeoff_m
+
+    def search(self, stops: FloatArray, settings: PlanSettings) -> IntArray:
+        """The stops' flying order: the sorties found, one after another (the cut of
+        :func:`_fly` then finds them, or a quicker cut of that order); the order as given
+        without an endurance or when the search finds nothing quicker."""
+        k = len(stops)
+        ident = np.arange(k)
+        if settings.endurance_min is None or k < 2:
+            return ident
+        endurance = settings.endurance_min * 60.0
+        times = self._leg_times(stops)
+        model = self.model
+        given = cut_sorties(
+            SortieLegs(
+                out_m=np.zeros(k),
+                hop_m=np.zeros(k - 1),
+                back_m=np.zeros(k),
+                out_s=times[k, :k],
+                hop_s=times[ident[:-1], ident[1:]] + model.stop_s,
+                back_s=times[:k, k],
+                ends_s=model.takeoff_s(self.takeoff_m)
+                + model.stop_s
+                + model.landing_s(self.takeoff_m),
+            ),
+            endurance,
+            [""] * k,
+        )
+        if len(given) == 1:
+            return ident
+        routes, _ = search_routes(
+            stops[:, :2],
+            self.site.home_xy,
+            self.takeoff_m,
+            model,
+            endurance,
+            [ident[s.first : s.stop] for s in given],
+            SEARCH_SHARE * settings.solve.time_limit_s,
+            settings.solve.seed,
+            leg_times=times,
+        )
+        return np.concatenate(routes)
+
+    def _leg_times(self, stops: FloatArray) -> FloatArray:
+        """(k + 1, k + 1) seconds of every leg the search may fly, as :func:`_fly` flies
+        it (row and column ``k`` home); inf for the pairs not followed."""
+        k = len(stops)
+        pts = np.vstack([stops, self.home_xyz])
+        if k <= _ALL_PAIRS_MAX:
+            pairs = {(i, j) for i in range(k + 1) for j in range(k + 1) if i != j}
+        else:
+            _, idx = cKDTree(stops[:, :2]).query(stops[:, :2], k=min(NEIGHBOURS + 1, k))
+            pairs = {(i, int(j)) for i, row in enumerate(np.asarray(idx)) for j in row if j != i}
+            pairs |= {(j, i) for i, j in pairs}
+            pairs |= {(i, i + 1) for i in range(k - 1)} | {(i + 1, i) for i in range(k - 1)}
+            pairs |= {(k, i) for i in range(k)} | {(i, k) for i in range(k)}
+        times = np.full((k + 1, k + 1), np.inf)
+        for i, j in pairs:
+            path = _follow(self.site, self.area.terrain, pts[i], pts[j], self.band)
+            times[i, j] = _path_s(self.model, path)
+        return times
 
 
 def _horizontal(path: FloatArray) -> float:

@@ -56,6 +56,10 @@ NEIGHBOURS = 10
 LEG_SAMPLES = 1024
 # Ruin and recreate takes out one stop and up to this many of its nearest stops.
 RUIN_MAX = 10
+# Improving moves one local search makes at most, per stop: each shortens the total, so this
+# is never reached in practice; it bounds the search if rounding ever let two moves undo
+# each other.
+_MOVES_PER_STOP = 1000
 # Ruin-and-recreate rounds run between two looks at the clock.
 _ROUNDS_PER_CALL = 64
 _EPS_S = 1e-7
@@ -527,6 +531,14 @@ def _improve_at(a, near, links, times, leg):  # type: ignore[no-untyped-def]
                     - _cost(before, s, leg)
                     - _cost(e, after, leg)
                 )
+                if leg[4].shape[0] > 0:
+                    # Given legs need not be the same both ways: the reversed stretch's own
+                    # legs change too.
+                    x = s
+                    while x != e:
+                        y = nxt[x]
+                        delta += _cost(y, x, leg) - _cost(x, y, leg)
+                        x = y
                 if delta < -_EPS_S and rtime[ra] + delta <= limit:
                     _reverse(s, e, ra, links)
                     _retime(ra, links, times, leg)
@@ -545,7 +557,8 @@ def _local_search(near, active, links, times, leg):  # type: ignore[no-untyped-d
         if active[a]:
             stack[top] = a
             top += 1
-    while top > 0:
+    moves = 0
+    while top > 0 and moves < _MOVES_PER_STOP * k:
         top -= 1
         a = stack[top]
         active[a] = False
@@ -555,6 +568,7 @@ def _local_search(near, active, links, times, leg):  # type: ignore[no-untyped-d
         b = _improve_at(a, near, links, times, leg)
         if b < 0:
             continue
+        moves += 1
         if top + 12 > stack.shape[0]:
             # Deeper than every stop four times over: wake them all and start again.
             top = 0
