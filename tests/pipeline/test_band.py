@@ -160,6 +160,8 @@ def _mountain(
     result = plan(dem, csv, settings)
     low, high = check_band_plan(dem, result, tmp_path / "out", targets)
     assert result.band_flight is not None
+    # The flight flown is one of those the time bound is below, sorties and all.
+    assert result.band_flight.time_bound_s <= result.flight_time_s
     print(
         f"{name}, {count} targets: {result.band_flight.inserted} inserted waypoints, "
         f"{len(result.missions)} sorties, {low:.2f} to {high:.2f} m above the surface"

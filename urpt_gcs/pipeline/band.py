@@ -29,6 +29,7 @@ from urpt_gcs.bound.certificate import Certificate, bound_time_s
 from urpt_gcs.bound.geometric import greedy_disjoint
 from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.bound.order_bound import prepare as prepare_bound
+from urpt_gcs.bound.sorties import SortieBudget, sortie_bound
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.band import FlightBand, band_profile
 from urpt_gcs.flight.band_refine import BandStops, refine_band_stops
@@ -168,7 +169,7 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
         outer = _outer(site, area, band, tol)
         certificate = _certify(outer, horizontal_m, budget)
         horizontal_bound = certificate.lower_bound_m
-        time_bound = _time_bound(site, area, band, model, outer, horizontal_bound)
+        time_bound = _time_bound(site, area, band, model, outer, horizontal_bound, settings)
         stages.lap("bound")
     band_flight = BandFlight(
         band=band,
@@ -607,18 +608,22 @@ def _time_bound(
     model: FlightModel,
     outer: BandOuter,
     horizontal_m: float,
+    settings: PlanSettings,
 ) -> float:
     """A lower bound of the flight time of any flight in the band that photographs every
     target, as the flight model counts it.
 
-    The take-off to the band's floor over home and the landing from it; a stop for each of
-    a set of targets no single photo can hold two of (their outer discs apart); and the legs,
-    each of which takes at least its horizontal time and at least its vertical time. Their
-    horizontal lengths add up to at least the horizontal bound; their climbs to at least the
-    range of heights every such flight spans, less the take-off: it must rise to see the
-    target whose outer disc sits highest (above its ground, and the floor over the disc's
-    lowest corner) and sink to see the one whose disc sits lowest (the ceiling over its
-    highest corner), and it starts and ends at home; its descents likewise.
+    The take-off to the band's floor over home and the landing from it, once for each of the
+    sorties the endurance forces at least (:func:`urpt_gcs.bound.sorties.sortie_bound`); a
+    stop for each of a set of targets no single photo can hold two of (their outer discs
+    apart); and the legs, each of which takes at least its horizontal time and at least its
+    vertical time. Their horizontal lengths add up to at least the horizontal bound; their
+    climbs to at least the range of heights every such flight spans, less the take-off: it
+    must rise to see the target whose outer disc sits highest (above its ground, and the
+    floor over the disc's lowest corner) and sink to see the one whose disc sits lowest (the
+    ceiling over its highest corner), and it starts and ends at home; its descents likewise.
+    Sorties from home and back only climb and sink more than one flight through the same
+    heights.
     """
     photos = len(greedy_disjoint(site.targets_xy, float(outer.radius_m.max())))
     # Inside the band every leg is flown in AUTO at the mission's cruise speed: the way home
@@ -629,9 +634,20 @@ def _time_bound(
     sink_to = min(float(np.min(outer.highest_m + band.ceiling_m)), home)
     vertical = max(rise_to - sink_to - band.floor_m, 0.0)
     legs = max(horizontal_m / speed, vertical / model.climb_m_s + vertical / model.descent_m_s)
-    return (
-        model.takeoff_s(band.floor_m)
-        + model.landing_s(band.floor_m)
-        + legs
-        + max(photos, 1) * model.stop_s
-    )
+    ends = model.takeoff_s(band.floor_m) + model.landing_s(band.floor_m)
+    sorties = 1
+    if settings.endurance_min is not None:
+        # Each sortie takes at least its ends, its stops and its horizontal length at the
+        # cruise speed (climbs only add to a leg): the sortie bound's budget, in the band.
+        budget = SortieBudget(
+            endurance_s=settings.endurance_min * 60.0,
+            ends_s=ends,
+            stop_s=model.stop_s,
+            per_metre_s=1.0 / speed,
+        )
+        away = np.hypot(*(site.targets_xy - np.asarray(site.home_xy)).T) - outer.radius_m
+        found = sortie_bound(
+            site.targets_xy, outer.radius_m, np.maximum(away, 0.0), horizontal_m, budget
+        )
+        sorties = max(found.sorties, 1)
+    return sorties * ends + legs + max(photos, 1) * model.stop_s
