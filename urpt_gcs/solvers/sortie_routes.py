@@ -385,42 +385,33 @@ def _reverse(s, e, r, links):  # type: ignore[no-untyped-def]
             break
         a = b
     # Now e..s run forwards through the swapped links.
-    prv[e] = before
-    nxt[s] = after
-    if before >= 0:
-        nxt[before] = e
+    _join(before, e, r, links)
+    _join(s, after, r, links)
+
+
+@njit(cache=True)
+def _join(u, w, r, links):  # type: ignore[no-untyped-def]
+    """Make ``w`` follow ``u`` in route ``r`` (-1 for home: ``w`` first, or ``u`` last)."""
+    if u >= 0:
+        links[_NXT, u] = w
     else:
-        links[_FIRST, r] = e
-    if after >= 0:
-        prv[after] = s
+        links[_FIRST, r] = w
+    if w >= 0:
+        links[_PRV, w] = u
 
 
 @njit(cache=True)
 def _unlink(a, links):  # type: ignore[no-untyped-def]
-    nxt, prv = links[_NXT], links[_PRV]
-    p = prv[a]
-    n = nxt[a]
-    if p >= 0:
-        nxt[p] = n
-    else:
-        links[_FIRST, links[_RID, a]] = n
-    if n >= 0:
-        prv[n] = p
-    nxt[a] = -1
-    prv[a] = -1
+    _join(links[_PRV, a], links[_NXT, a], links[_RID, a], links)
+    links[_NXT, a] = -1
+    links[_PRV, a] = -1
 
 
 @njit(cache=True)
 def _link(a, u, w, r, links):  # type: ignore[no-untyped-def]
     """Put ``a`` between ``u`` and ``w`` (adjacent in route ``r``; -1 for home)."""
-    links[_PRV, a] = u
-    links[_NXT, a] = w
-    if u >= 0:
-        links[_NXT, u] = a
-    else:
-        links[_FIRST, r] = a
-    if w >= 0:
-        links[_PRV, w] = a
+    _join(u, a, r, links)
+    _join(a, w, r, links)
     links[_RID, a] = r
 
 
@@ -503,18 +494,8 @@ def _improve_at(a, near, links, times, leg):  # type: ignore[no-untyped-def]
                 ta = _joined(x, cb, times, leg)
                 tb = _joined(y, ca, times, leg)
                 if ta <= limit and tb <= limit and ta + tb < rtime[ra] + rtime[rb] - _EPS_S:
-                    if x >= 0:
-                        nxt[x] = cb
-                    else:
-                        links[_FIRST, ra] = cb
-                    if cb >= 0:
-                        prv[cb] = x
-                    if y >= 0:
-                        nxt[y] = ca
-                    else:
-                        links[_FIRST, rb] = ca
-                    if ca >= 0:
-                        prv[ca] = y
+                    _join(x, cb, ra, links)
+                    _join(y, ca, rb, links)
                     _retime(ra, links, times, leg)
                     _retime(rb, links, times, leg)
                     return b
