@@ -151,3 +151,48 @@ def test_given_leg_times_are_what_is_searched(seed: int) -> None:
     for r in found:
         pairs = set(itertools.pairwise(r.tolist()))
         assert (3, 4) not in pairs and (4, 3) not in pairs
+
+
+def _best_over_positions(
+    choices: list[np.ndarray], model: FlightModel, endurance_s: float
+) -> float:
+    """The brute-force optimum when each stop may be flown from any of its positions."""
+    best = math.inf
+    for pick in itertools.product(*[range(len(c)) for c in choices]):
+        xy = np.array([c[i] for c, i in zip(choices, pick, strict=True)])
+        _, quick, _ = subsets(xy, model, endurance_s, HOME, ALT_M)
+        best = min(best, best_partition(quick, len(xy)))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_alternative_positions_are_chosen_for_the_sorties(seed: int) -> None:
+    """Each stop may also be flown from two other positions (a target seen from several
+    viewpoints): the search's sorties are at least as quick as without them, fly every stop
+    from one of its own positions, and reach the brute-force optimum over every choice of
+    positions and every partition."""
+    rng = np.random.default_rng(200 + seed)
+    n = 5
+    xy = rng.uniform(-400.0, 400.0, (n, 2))
+    others = xy[:, None, :] + rng.uniform(-150.0, 150.0, (n, 2, 2))
+    choices = [np.vstack([xy[i], others[i]]) for i in range(n)]
+    model = _model()
+    alone = max(sortie_time(model, xy[[i]], HOME, ALT_M) for i in range(n))
+    endurance = alone + 0.3 * (sortie_time(model, xy, HOME, ALT_M) - alone)
+    start = _cut(xy, np.arange(n), model, endurance)
+    plain, _ = search_routes(xy, HOME, ALT_M, model, endurance, start, 0.2, seed)
+    plain_s = _check(xy, plain, model, endurance)
+    alternatives = (others.reshape(-1, 2), np.arange(0, 2 * n + 1, 2))
+    found, report = search_routes(
+        xy, HOME, ALT_M, model, endurance, start, 0.3, seed, alternatives=alternatives
+    )
+    at = report.stops_xy
+    for i in range(n):
+        assert np.isclose(choices[i], at[i]).all(axis=1).any(), "a position it was not given"
+    total = _check(at, found, model, endurance)
+    assert report.flight_time_s == pytest.approx(total, abs=1e-6)
+    assert total <= plain_s + 1e-9
+    optimum = _best_over_positions(choices, model, endurance)
+    assert total >= optimum - 1e-6
+    print(f"\nseed {seed}: {plain_s:.1f} s fixed, {total:.1f} s chosen, optimum {optimum:.1f} s")
+    assert total == pytest.approx(optimum, rel=1e-9)

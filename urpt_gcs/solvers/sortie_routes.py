@@ -92,6 +92,8 @@ class RouteSearch:
         Ruin-and-recreate rounds run.
     search_s
         Wall time spent.
+    stops_xy
+        Where each stop is flown from: as given, or the alternative the search chose.
     """
 
     start_s: float
@@ -100,6 +102,7 @@ class RouteSearch:
     sorties: int
     rounds: int
     search_s: float
+    stops_xy: FloatArray
 
 
 def route_times(
@@ -139,6 +142,7 @@ def search_routes(
     budget_s: float,
     seed: int = 0,
     leg_times: FloatArray | None = None,
+    alternatives: tuple[FloatArray, IntArray] | None = None,
 ) -> tuple[list[IntArray], RouteSearch]:
     """Improve sorties over fixed stops for the least total flight time.
 
@@ -163,6 +167,11 @@ def search_routes(
         When the legs are not level: (k + 1, k + 1) seconds, row and column ``k`` home, each
         leg's time from rest to rest as flown (its stop aside); inf where a leg is not
         timed. ``altitude_rel_m`` then gives the take-off's and landing's height.
+    alternatives
+        With level legs: other positions each stop may be flown from (each seeing what
+        the stop must see, checked by the caller): ``(xy, ptr)``, stop ``i``'s in
+        ``xy[ptr[i]:ptr[i + 1]]``. A move puts a stop at one of them when that shortens its
+        sortie.
 
     Returns
     -------
@@ -171,13 +180,13 @@ def search_routes(
     """
     warm_up()
     start = time.perf_counter()
-    xy = np.ascontiguousarray(stops_xy, dtype=np.float64)
+    xy = np.array(stops_xy, dtype=np.float64, order="C")
     k = len(xy)
     start_times = route_times(xy, home_xy, altitude_rel_m, model, routes, leg_times)
     start_total = math.fsum(start_times.tolist())
 
     def result(
-        found: list[IntArray], total: float, rounds: int
+        found: list[IntArray], total: float, rounds: int, at: FloatArray
     ) -> tuple[list[IntArray], RouteSearch]:
         return found, RouteSearch(
             start_s=start_total,
@@ -186,12 +195,14 @@ def search_routes(
             sorties=len(found),
             rounds=rounds,
             search_s=time.perf_counter() - start,
+            stops_xy=at,
         )
 
+    given_xy = xy.copy()
     if k < 2:
-        return routes, result(routes, start_total, 0)[1]
+        return routes, result(routes, start_total, 0, given_xy)[1]
     links, times, near, leg = _prepare(
-        xy, home_xy, altitude_rel_m, model, endurance_s, routes, leg_times
+        xy, home_xy, altitude_rel_m, model, endurance_s, routes, leg_times, alternatives
     )
     _local_search(near, np.ones(k, dtype=np.bool_), links, times, leg)
     rounds = 0
@@ -200,11 +211,12 @@ def search_routes(
         _ruin_and_recreate(near, _ROUNDS_PER_CALL, rng, links, times, leg)
         rounds += _ROUNDS_PER_CALL
     found = _routes(links)
-    exact = route_times(xy, home_xy, altitude_rel_m, model, found, leg_times)
+    at = leg[0]
+    exact = route_times(at, home_xy, altitude_rel_m, model, found, leg_times)
     total = math.fsum(exact.tolist())
     if total >= start_total or float(exact.max()) > endurance_s:
-        return result(routes, start_total, rounds)
-    return result(found, total, rounds)
+        return result(routes, start_total, rounds, given_xy)
+    return result(found, total, rounds, at)
 
 
 @functools.cache
@@ -214,7 +226,9 @@ def warm_up() -> None:
     xy = np.random.default_rng(0).random((6, 2)) * 100.0
     model = FlightModel.arducopter(cruise_m_s=10.0, hold_s=1.0)
     routes = [np.arange(3), np.arange(3, 6)]
-    level = _prepare(xy, (50.0, 50.0), 30.0, model, 1e6, routes)
+    level = _prepare(
+        xy, (50.0, 50.0), 30.0, model, 1e6, routes, None, (xy[::-1].copy(), np.arange(7))
+    )
     gap = np.hypot(*(np.vstack([xy, [50.0, 50.0]])[:, None] - np.vstack([xy, [50.0, 50.0]])).T)
     timed = _prepare(xy, (50.0, 50.0), 30.0, model, 1e6, routes, model.leg_s(gap))
     for links, times, near, leg in (level, timed):
@@ -222,7 +236,9 @@ def warm_up() -> None:
         _ruin_and_recreate(near, 1, np.random.default_rng(0), links, times, leg)
 
 
-Legs = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+Legs = tuple[
+    FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, IntArray
+]
 
 
 def _prepare(
@@ -233,11 +249,12 @@ def _prepare(
     endurance_s: float,
     routes: list[IntArray],
     leg_times: FloatArray | None = None,
+    alternatives: tuple[FloatArray, IntArray] | None = None,
 ) -> tuple[IntArray, FloatArray, IntArray, Legs]:
     """The routes as the kernels hold them (linked, and timed), each stop's nearest stops,
     and what the kernels time legs with: the stops, their legs from and to home, the
-    scalars, the short-leg table and the legs' times between stops when given (else
-    empty)."""
+    scalars, the short-leg table, the legs' times between stops when given (else empty),
+    and the alternative positions with their legs from and to home (else none)."""
     k = len(xy)
     to_home = np.hypot(*(xy - np.asarray(home_xy, dtype=np.float64)).T)
     short_m, over_s = model.cruise_overhead()
@@ -277,7 +294,15 @@ def _prepare(
             links[_NXT, a] = b
             links[_PRV, b] = a
     times = np.zeros((3, k))
-    leg = (xy, home_s, par, table, dense)
+    if alternatives is None or leg_times is not None:
+        alt_xy, alt_ptr = np.zeros((0, 2)), np.zeros(k + 1, dtype=np.int64)
+    else:
+        alt_xy = np.array(alternatives[0], dtype=np.float64, order="C").reshape(-1, 2)
+        alt_ptr = np.ascontiguousarray(alternatives[1], dtype=np.int64)
+    alt_away = np.hypot(*(alt_xy - np.asarray(home_xy, dtype=np.float64)).T)
+    alt_home = np.vstack([model.leg_s(alt_away), model.return_s(alt_away)]).astype(np.float64)
+    alt_home = np.ascontiguousarray(alt_home.reshape(2, -1))
+    leg = (xy, home_s, par, table, dense, alt_xy, alt_home, alt_ptr)
     for r in range(len(routes)):
         _retime(r, links, times, leg)
     return links, times, near, leg
@@ -300,7 +325,7 @@ def _routes(links: IntArray) -> list[IntArray]:
 def _cost(x, y, leg):  # type: ignore[no-untyped-def]
     """Time of the leg from ``x`` to ``y`` (-1 is home: out at the cruise speed, back at the
     return speed)."""
-    xy, home_s, par, table, dense = leg
+    xy, home_s, par, table, dense = leg[0], leg[1], leg[2], leg[3], leg[4]
     if x < 0:
         return home_s[_OUT, y]
     if y < 0:
@@ -433,6 +458,32 @@ def _inserted(a, u, w, leg):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def _swap_position(a, j, leg):  # type: ignore[no-untyped-def]
+    """Exchange stop ``a``'s position (and its legs from and to home) with alternative
+    ``j``."""
+    xy, home_s, alt_xy, alt_home = leg[0], leg[1], leg[5], leg[6]
+    for c in range(2):
+        xy[a, c], alt_xy[j, c] = alt_xy[j, c], xy[a, c]
+        home_s[c, a], alt_home[c, j] = alt_home[c, j], home_s[c, a]
+
+
+@njit(cache=True)
+def _replace(a, pa, na, ra, links, times, leg, limit):  # type: ignore[no-untyped-def]
+    """Fly ``a`` from the first of its alternative positions that shortens its sortie
+    (between ``pa`` and ``na`` of route ``ra``); whether one did."""
+    alt_ptr = leg[7]
+    now = _cost(pa, a, leg) + _cost(a, na, leg)
+    for j in range(alt_ptr[a], alt_ptr[a + 1]):
+        _swap_position(a, j, leg)
+        then = _cost(pa, a, leg) + _cost(a, na, leg)
+        if then < now - _EPS_S and times[_RTIME, ra] + then - now <= limit:
+            _retime(ra, links, times, leg)
+            return True
+        _swap_position(a, j, leg)
+    return False
+
+
+@njit(cache=True)
 def _improve_at(a, near, links, times, leg):  # type: ignore[no-untyped-def]
     """Apply the first move that puts ``a`` next to one of its near stops and shortens the
     total time; return the other stop it touched, or -1 when there is none."""
@@ -442,6 +493,9 @@ def _improve_at(a, near, links, times, leg):  # type: ignore[no-untyped-def]
     ra = rid[a]
     pa = prv[a]
     na = nxt[a]
+    # Flying a from another of its positions.
+    if _replace(a, pa, na, ra, links, times, leg, limit):
+        return a
     # Taking a out saves its place in its sortie, or the whole sortie when it flies alone.
     removed = -rtime[ra] if links[_SIZE, ra] == 1 else -_inserted(a, pa, na, leg)
     for j in range(near.shape[1]):
@@ -573,19 +627,59 @@ def _total(links, times):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def _reinsert(a, near, links, times, leg):  # type: ignore[no-untyped-def]
+    """Put stop ``a`` (out of every route) back where it costs least: next to one of its
+    near stops, from whichever of its positions, or alone in a sortie of its own."""
+    par = leg[2]
+    limit = par[_ENDURANCE] + _EPS_S
+    rid = links[_RID]
+    best = np.inf
+    bu, bw, br, bj = -1, -1, -1, -1
+    alt_ptr = leg[7]
+    # j: the alternative position tried (-1: where a is now).
+    for j in range(alt_ptr[a] - 1, alt_ptr[a + 1]):
+        if j >= alt_ptr[a]:
+            _swap_position(a, j, leg)
+        alone = leg[1][_OUT, a] + leg[1][_BACK, a] + par[_STOP] + par[_TAKEOFF] + par[_LANDING]
+        if alone < best:
+            best, bu, bw, br, bj = alone, -1, -1, -1, j
+        for i in range(near.shape[1]):
+            b = near[a, i]
+            rb = rid[b]
+            if rb < 0:
+                continue
+            for side in range(2):
+                u = b if side == 0 else links[_PRV, b]
+                w = links[_NXT, b] if side == 0 else b
+                ins = _inserted(a, u, w, leg)
+                if ins < best and times[_RTIME, rb] + ins <= limit:
+                    best, bu, bw, br, bj = ins, u, w, rb, j
+        if j >= alt_ptr[a]:
+            _swap_position(a, j, leg)
+    if bj >= alt_ptr[a]:
+        _swap_position(a, bj, leg)
+    if br < 0:
+        for r in range(rid.shape[0]):
+            if links[_SIZE, r] == 0:
+                br = r
+                break
+    _link(a, bu, bw, br, links)
+    _retime(br, links, times, leg)
+
+
+@njit(cache=True)
 def _ruin_and_recreate(near, rounds, rng, links, times, leg):  # type: ignore[no-untyped-def]
     """Rounds of ruin (a stop and some of its nearest taken out), recreate (each put back
     where it costs least, or alone) and local search; a round is kept when the total time
     falls, and undone otherwise."""
     k = near.shape[0]
     rid = links[_RID]
-    par = leg[2]
-    limit = par[_ENDURANCE] + _EPS_S
     active = np.zeros(k, dtype=np.bool_)
     taken = np.empty(near.shape[1] + 1, dtype=np.int64)
     for _ in range(rounds):
         before = _total(links, times)
         keep = links.copy()
+        kept_at = (leg[0].copy(), leg[1].copy(), leg[5].copy(), leg[6].copy())
         seed_stop = rng.integers(0, k)
         m = 1 + rng.integers(0, min(RUIN_MAX, near.shape[1]))
         taken[0] = seed_stop
@@ -606,30 +700,14 @@ def _ruin_and_recreate(near, rounds, rng, links, times, leg):  # type: ignore[no
         back = taken[:count].copy()
         rng.shuffle(back)
         for a in back:
-            # A sortie of its own, unless it fits more cheaply next to a near stop.
-            best = leg[1][_OUT, a] + leg[1][_BACK, a] + par[_STOP] + par[_TAKEOFF] + par[_LANDING]
-            bu, bw, br = -1, -1, -1
-            for i in range(near.shape[1]):
-                b = near[a, i]
-                rb = rid[b]
-                if rb < 0:
-                    continue
-                for side in range(2):
-                    u = b if side == 0 else links[_PRV, b]
-                    w = links[_NXT, b] if side == 0 else b
-                    ins = _inserted(a, u, w, leg)
-                    if ins < best and times[_RTIME, rb] + ins <= limit:
-                        best, bu, bw, br = ins, u, w, rb
-            if br < 0:
-                for r in range(k):
-                    if links[_SIZE, r] == 0:
-                        br = r
-                        break
-            _link(a, bu, bw, br, links)
-            _retime(br, links, times, leg)
+            _reinsert(a, near, links, times, leg)
             active[a] = True
         _local_search(near, active, links, times, leg)
         if _total(links, times) >= before - _EPS_S:
             links[:] = keep
+            leg[0][:] = kept_at[0]
+            leg[1][:] = kept_at[1]
+            leg[5][:] = kept_at[2]
+            leg[6][:] = kept_at[3]
             for r in range(k):
                 _retime(r, links, times, leg)
