@@ -144,6 +144,16 @@ def _feasible(
     return ok
 
 
+def flies_from(site: Site, cand: FloatArray, sees: BoolArray, depot: FloatArray) -> BoolArray:
+    """Whether a stop could be flown from each candidate (a cone camera): it sees every
+    target of its row of ``sees`` from all of the tolerance ring, from itself and as written,
+    and its leg straight home clears the terrain (a sortie may end there)."""
+    ok = _sees_all(site, cand, sees, None)
+    if ok.any():
+        ok[ok] = _legs_clear(site, [cand[ok]], [np.tile(depot, (int(ok.sum()), 1))])
+    return ok
+
+
 def _legs_clear(site: Site, starts: list[FloatArray], ends: list[FloatArray]) -> BoolArray:
     """Per stop, whether its legs (``starts[j][i]`` to ``ends[j][i]`` for every ``j``) keep
     the clearance over terrain that is read."""
@@ -555,6 +565,7 @@ def written_grid(
 __all__ = [
     "Refinement",
     "Site",
+    "flies_from",
     "refine_along",
     "refine_tour",
     "tour_along",

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
 from urpt_gcs.solvers import Tour
-from urpt_gcs.solvers.sortie_routes import RouteSearch, search_routes
+from urpt_gcs.solvers.sortie_routes import RouteSearch, search_routes, warm_up
 
 __all__ = [
     "NEIGHBOURS",
@@ -199,6 +199,7 @@ def order_sorties(
     names: list[str],
     budget_s: float,
     seed: int = 0,
+    alternatives: tuple[FloatArray, IntArray] | None = None,
 ) -> tuple[Tour, SortieOrder | None]:
     """Reorder the tour's stops for the least total flight time once cut into sorties.
 
@@ -212,6 +213,9 @@ def order_sorties(
         Wall time the search may spend.
     seed
         Order in which the stops are visited by the search.
+    alternatives
+        Other positions each stop may be flown from (see
+        :func:`~urpt_gcs.solvers.sortie_routes.search_routes`); None: each from where it is.
 
     Returns
     -------
@@ -224,6 +228,7 @@ def order_sorties(
     plain = split_sorties(xy, home_xy, altitude_rel_m, model, endurance_s, names)
     if endurance_s is None or len(plain) == 1:
         return tour, None
+    warm_up()  # compiled (or loaded) before the clock starts: the budget is the search's
     start = time.perf_counter()
     k = len(xy)
     objective = _Objective(xy, home_xy, altitude_rel_m, model, endurance_s)
@@ -268,7 +273,10 @@ def order_sorties(
         [order[s.first : s.stop] for s in searched],
         budget_s - (time.perf_counter() - start),
         seed,
+        alternatives=alternatives,
     )
+    moved = np.any(route_search.stops_xy != xy, axis=1)
+    xy = route_search.stops_xy
     order = np.concatenate(_by_bearing(routes, xy, home_xy))
     cut = split_sorties(
         xy[order], home_xy, altitude_rel_m, model, endurance_s, [names[i] for i in order.tolist()]
@@ -291,7 +299,7 @@ def order_sorties(
     length = float(np.hypot(*np.diff(path, axis=0).T).sum())
     reordered = replace(
         tour,
-        order=tuple(tour.order[i] for i in order.tolist()),
+        order=tuple(-1 if moved[i] else tour.order[i] for i in order.tolist()),
         points_xy=xy[order],
         sees=tour.sees[order],
         headings_deg=None if tour.headings_deg is None else tour.headings_deg[order],

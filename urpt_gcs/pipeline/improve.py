@@ -10,21 +10,22 @@ import dataclasses
 import math
 
 import numpy as np
-import pyproj
 
-from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.certificate import Certificate, certify
 from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.bound.sorties import SortieBudget, sortie_bound, star_distances
-from urpt_gcs.flight.refinement import Refinement, Site, refine_along, refine_tour, written_grid
+from urpt_gcs.flight.refinement import Refinement, refine_along, refine_tour
 from urpt_gcs.flight.sorties import SortieOrder
 from urpt_gcs.pipeline.area import PlanArea, SiteInputs, altitude_rel
-from urpt_gcs.pipeline.missions import CheckedFlight, flight_model, sorties_and_missions
+from urpt_gcs.pipeline.missions import (
+    CheckedFlight,
+    check_site,
+    flight_model,
+    sorties_and_missions,
+)
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages
 from urpt_gcs.problem.instance import Instance
-from urpt_gcs.site.dem import WGS84
-from urpt_gcs.site.reading import fill_along
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.outer import finer_stars, outer_regions
 
@@ -60,7 +61,7 @@ def refine_stops(
     tuple of (Tour, Refinement)
         The refined tour, and its length before and after.
     """
-    return refine_tour(_check_site(site, area, settings), tour, site.home_xy, _REFINE_MAX_S)
+    return refine_tour(check_site(site, area, settings), tour, site.home_xy, _REFINE_MAX_S)
 
 
 def bounds_tour(
@@ -97,7 +98,7 @@ def bounds_tour(
     """
     if certificate.relaxed_tour_xy is None:
         return None
-    check = _check_site(site, area, settings)
+    check = check_site(site, area, settings)
     read = refine_along(check, certificate.relaxed_tour_xy, site.home_xy, tour, _REFINE_MAX_S)
     if read is None:
         return None
@@ -171,36 +172,6 @@ def certify_flight(
     value = float(max(single.lower_bound_m, min(sorties.length_m, flown_m)))
     method = single.method if value <= single.lower_bound_m else f"{single.method} + sorties"
     return dataclasses.replace(single, lower_bound_m=value, method=method, sorties=sorties)
-
-
-def _check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site:
-    """What a stop is checked against: the position margin, the written grid and the legs'
-    clearance, on the terrain read so far (filled along new legs)."""
-    to_geo = pyproj.Transformer.from_crs(site.crs, WGS84, always_xy=True)
-    to_grid = pyproj.Transformer.from_crs(WGS84, site.crs, always_xy=True)
-
-    def to_latlon(xy: FloatArray) -> FloatArray:
-        lon, lat = to_geo.transform(xy[:, 0], xy[:, 1])
-        return np.column_stack([lat, lon]).astype(np.float64)
-
-    def to_xy(lat_lon: FloatArray) -> FloatArray:
-        x, y = to_grid.transform(lat_lon[:, 1], lat_lon[:, 0])
-        return np.column_stack([x, y]).astype(np.float64)
-
-    def fill(a: FloatArray, b: FloatArray) -> None:
-        fill_along(site.dem, area.terrain, a, b)
-
-    return Site(
-        terrain=area.terrain,
-        targets_xy=site.targets_xy,
-        ground_m=area.ground_m,
-        camera=area.camera,
-        tolerance_m=settings.position_tolerance_m,
-        min_clearance_m=settings.min_clearance_m,
-        written=written_grid(to_latlon, to_xy),
-        fill=fill,
-        workers=settings.workers,
-    )
 
 
 __all__ = ["bounds_tour", "certify_flight", "refine_stops"]

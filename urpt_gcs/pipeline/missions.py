@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
-from urpt_gcs.arrays import BoolArray, FloatArray
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.mission import (
     GeoPoint,
@@ -22,6 +22,7 @@ from urpt_gcs.flight.mission import (
     build_mission,
     waypoint_positions,
 )
+from urpt_gcs.flight.refinement import Site, flies_from, written_grid
 from urpt_gcs.flight.safety import (
     Leg,
     check_height_above_ground,
@@ -34,10 +35,18 @@ from urpt_gcs.pipeline.area import PlanArea, SiteInputs, altitude_rel, latlon_to
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages
 from urpt_gcs.problem.flight_time import FlightModel, Sortie, split_sorties
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.site.camera import true_bearing_deg
+from urpt_gcs.site.dem import WGS84
 from urpt_gcs.site.reading import fill_along
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.cover import cover_sets
+
+# Other positions offered to the sortie search for each stop: its nearest candidates that see
+# what it must (each checked on the terrain before the search).
+ALTERNATIVES = 4
+# Halvings of the way from a candidate that fails the checks to its stop.
+_TOWARDS_STOP_STEPS = 6
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,7 +78,12 @@ class CheckedFlight:
 
 
 def sorties_and_missions(
-    site: SiteInputs, area: PlanArea, tour: Tour, settings: PlanSettings, stages: Stages
+    site: SiteInputs,
+    area: PlanArea,
+    tour: Tour,
+    settings: PlanSettings,
+    stages: Stages,
+    instance: Instance | None = None,
 ) -> tuple[Tour, SortieOrder | None, CheckedFlight]:
     """The tour ordered and cut into sorties, and its missions written and checked.
 
@@ -84,6 +98,9 @@ def sorties_and_missions(
         The plan's settings: endurance, speeds, mission and check options.
     stages
         Announces the ordering and the checks and keeps their times.
+    instance
+        The candidate viewpoints the tour was solved over: the sortie search may fly a stop
+        from another of them that sees what it must (None: from where it is).
 
     Returns
     -------
@@ -94,6 +111,9 @@ def sorties_and_missions(
     endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
     budget = SEARCH_SHARE * settings.solve.time_limit_s
     stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
+    alternatives = None
+    if instance is not None and endurance is not None:
+        alternatives = _alternatives(site, area, instance, tour, settings)
     searched, sortie_order = order_sorties(
         tour,
         site.home_xy,
@@ -103,6 +123,7 @@ def sorties_and_missions(
         [f"stop {k}" for k in range(1, len(tour.sees) + 1)],
         budget,
         settings.solve.seed,
+        alternatives,
     )
     stages.lap("sorties")
     stages.say("checking the missions")
@@ -120,6 +141,91 @@ def sorties_and_missions(
         searched, sortie_order = tour, None
     stages.lap("checks")
     return searched, sortie_order, flight
+
+
+def check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site:
+    """What a stop is checked against: the position margin, the written grid and the legs'
+    clearance, on the terrain read so far (filled along new legs)."""
+    to_geo = pyproj.Transformer.from_crs(site.crs, WGS84, always_xy=True)
+    to_grid = pyproj.Transformer.from_crs(WGS84, site.crs, always_xy=True)
+
+    def to_latlon(xy: FloatArray) -> FloatArray:
+        lon, lat = to_geo.transform(xy[:, 0], xy[:, 1])
+        return np.column_stack([lat, lon]).astype(np.float64)
+
+    def to_xy(lat_lon: FloatArray) -> FloatArray:
+        x, y = to_grid.transform(lat_lon[:, 1], lat_lon[:, 0])
+        return np.column_stack([x, y]).astype(np.float64)
+
+    def fill(a: FloatArray, b: FloatArray) -> None:
+        fill_along(site.dem, area.terrain, a, b)
+
+    return Site(
+        terrain=area.terrain,
+        targets_xy=site.targets_xy,
+        ground_m=area.ground_m,
+        camera=area.camera,
+        tolerance_m=settings.position_tolerance_m,
+        min_clearance_m=settings.min_clearance_m,
+        written=written_grid(to_latlon, to_xy),
+        fill=fill,
+        workers=settings.workers,
+    )
+
+
+def _alternatives(
+    site: SiteInputs, area: PlanArea, instance: Instance, tour: Tour, settings: PlanSettings
+) -> tuple[FloatArray, IntArray] | None:
+    """Other positions each stop may be flown from in the sortie search: its nearest
+    candidate viewpoints that see every target it is counted for, checked as refinement checks
+    a stop (from all of the tolerance ring and as written, and the leg straight home). None
+    for a frame camera (its stops carry headings) or a tour not over the plane's points."""
+    if tour.headings_deg is not None or tour.points_xy is None or instance.points_xy is None:
+        return None
+    covers = instance.covers
+    pair_viewpoint = np.repeat(np.arange(len(covers.ptr) - 1), np.diff(covers.ptr))
+    by_target = np.argsort(covers.target, kind="stable")
+    viewpoints_of = pair_viewpoint[by_target]
+    target_ptr = np.searchsorted(covers.target[by_target], np.arange(covers.n_targets + 1))
+    found: list[FloatArray] = []
+    owner: list[IntArray] = []
+    for k, row in enumerate(tour.sees):
+        targets = np.flatnonzero(row)
+        if targets.size == 0:
+            continue
+        pool = viewpoints_of[target_ptr[targets[0]] : target_ptr[targets[0] + 1]]
+        for t in targets[1:].tolist():
+            pool = np.intersect1d(pool, viewpoints_of[target_ptr[t] : target_ptr[t + 1]])
+        away = np.hypot(*(instance.points_xy[pool] - tour.points_xy[k]).T)
+        pool = pool[away > 0.0]
+        pick = pool[np.argsort(away[away > 0.0], kind="stable")[:ALTERNATIVES]]
+        found.append(instance.points_xy[pick])
+        owner.append(np.full(len(pick), k, dtype=np.int64))
+    if not found:
+        return None
+    xy, own = np.vstack(found), np.concatenate(owner)
+    check = check_site(site, area, settings)
+    home = np.asarray(site.home_xy, dtype=np.float64)
+    # Candidates lie on the edge of what they see, where the tolerance ring leaves it: each
+    # is drawn towards its stop (which passes) by halving, and the passing point nearest it
+    # kept.
+    stop_xy = tour.points_xy[own]
+    ok = flies_from(check, xy, tour.sees[own], home)
+    lo = np.zeros(len(xy))  # share of the way to the stop known to fail (0: the candidate)
+    hi = np.where(ok, 0.0, 1.0)  # share known to pass (1: the stop itself)
+    for _ in range(_TOWARDS_STOP_STEPS):
+        todo = np.flatnonzero(hi > lo)
+        if todo.size == 0:
+            break
+        mid = 0.5 * (lo[todo] + hi[todo])
+        at = xy[todo] + mid[:, None] * (stop_xy[todo] - xy[todo])
+        passed = flies_from(check, at, tour.sees[own[todo]], home)
+        hi[todo] = np.where(passed, mid, hi[todo])
+        lo[todo] = np.where(passed, lo[todo], mid)
+    keep = hi < 1.0
+    moved = xy + hi[:, None] * (stop_xy - xy)
+    xy, own = moved[keep], own[keep]
+    return xy, np.searchsorted(own, np.arange(len(tour.sees) + 1)).astype(np.int64)
 
 
 def _write_missions(
@@ -279,4 +385,4 @@ def _stop_name(sees: BoolArray, names: list[str]) -> str:
     return "viewpoint for " + "+".join(names[t] for t in np.flatnonzero(sees).tolist())
 
 
-__all__ = ["CheckedFlight", "flight_model", "sorties_and_missions"]
+__all__ = ["ALTERNATIVES", "CheckedFlight", "check_site", "flight_model", "sorties_and_missions"]

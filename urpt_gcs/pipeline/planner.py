@@ -137,7 +137,9 @@ def finish_plan(
         tour, refinement = refine_stops(site, area, tour, settings)
         stages.lap("refine")
     planned = tour
-    tour, sortie_order, flight = sorties_and_missions(site, area, planned, settings, stages)
+    tour, sortie_order, flight = sorties_and_missions(
+        site, area, planned, settings, stages, instance
+    )
     certificate = None
     if settings.certify:
         bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
