@@ -2,8 +2,9 @@
 least total flight time.
 
 Our planning solves one GTSP tour over the candidate viewpoints
-(:func:`urpt_gcs.solvers.registry.solve`) and then orders its stops for the cut into sorties
-(:func:`urpt_gcs.flight.sorties.order_sorties`). PyVRP (an optional dependency, the ``bench``
+(:func:`urpt_gcs.solvers.registry.solve`) and then searches its sorties
+(:func:`urpt_gcs.flight.sorties.order_sorties`: the order for its cut, then the sorties as
+routes, each stop flyable from the nearest other viewpoints that see what it sees). PyVRP (an optional dependency, the ``bench``
 extra) solves the same question as a vehicle-routing problem:
 
 - home is the one depot and every sortie is a vehicle of one type, as many available as there
@@ -36,12 +37,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.flight.sorties import SEARCH_SHARE, order_sorties
+from urpt_gcs.pipeline.missions import ALTERNATIVES
 from urpt_gcs.problem.flight_time import FlightModel, split_sorties
 from urpt_gcs.problem.instance import Covers, Geometry, Instance, euclidean_matrix
 from urpt_gcs.solvers import SolveSettings, choose, prepare, solve
+from urpt_gcs.solvers.sortie_routes import viewpoints_seeing
 
 if TYPE_CHECKING:
     import pyvrp
@@ -302,13 +306,31 @@ def our_sorties(
         raise ValueError(f"{tour.solver}: a stop that is not an instance viewpoint")
     names = [f"stop {k}" for k in range(1, len(tour.order) + 1)]
     home = (float(instance.depot_xy[0]), float(instance.depot_xy[1]))
+    assert tour.points_xy is not None and instance.points_xy is not None
+    # Each stop may be flown from the other viewpoints of what it sees, as PyVRP chooses
+    # among a group's clients (no terrain here: every viewpoint sees what it is given).
+    others, owner = viewpoints_seeing(instance, tour.points_xy, tour.sees, ALTERNATIVES)
+    alternatives = (others, np.searchsorted(owner, np.arange(len(tour.sees) + 1)))
     tour, _ = order_sorties(
-        tour, home, altitude_rel_m, model, endurance_s, names, wall_s - solve_s, seed
+        tour,
+        home,
+        altitude_rel_m,
+        model,
+        endurance_s,
+        names,
+        wall_s - solve_s,
+        seed,
+        alternatives,
     )
     assert tour.points_xy is not None
     cut = split_sorties(tour.points_xy, home, altitude_rel_m, model, endurance_s, names)
     wall = time.perf_counter() - started
-    routes = tuple(tuple(int(v) for v in tour.order[s.first : s.stop]) for s in cut)
+    # A stop flown from an alternative is that viewpoint: found by its position.
+    dist, nearest = cKDTree(instance.points_xy).query(tour.points_xy)
+    if float(np.max(dist)) > 0.0:
+        raise ValueError("ours: a stop that is not at an instance viewpoint")
+    visited = np.asarray(nearest, dtype=np.int64)
+    routes = tuple(tuple(int(v) for v in visited[s.first : s.stop]) for s in cut)
     return SortieRun(
         solver=f"ours ({name})",
         routes=routes,

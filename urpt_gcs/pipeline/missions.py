@@ -40,6 +40,7 @@ from urpt_gcs.site.camera import true_bearing_deg
 from urpt_gcs.site.dem import WGS84
 from urpt_gcs.site.reading import fill_along
 from urpt_gcs.solvers import Tour
+from urpt_gcs.solvers.sortie_routes import viewpoints_seeing
 from urpt_gcs.visibility.cover import cover_sets
 
 # Other positions offered to the sortie search for each stop: its nearest candidates that see
@@ -182,28 +183,9 @@ def _alternatives(
     for a frame camera (its stops carry headings) or a tour not over the plane's points."""
     if tour.headings_deg is not None or tour.points_xy is None or instance.points_xy is None:
         return None
-    covers = instance.covers
-    pair_viewpoint = np.repeat(np.arange(len(covers.ptr) - 1), np.diff(covers.ptr))
-    by_target = np.argsort(covers.target, kind="stable")
-    viewpoints_of = pair_viewpoint[by_target]
-    target_ptr = np.searchsorted(covers.target[by_target], np.arange(covers.n_targets + 1))
-    found: list[FloatArray] = []
-    owner: list[IntArray] = []
-    for k, row in enumerate(tour.sees):
-        targets = np.flatnonzero(row)
-        if targets.size == 0:
-            continue
-        pool = viewpoints_of[target_ptr[targets[0]] : target_ptr[targets[0] + 1]]
-        for t in targets[1:].tolist():
-            pool = np.intersect1d(pool, viewpoints_of[target_ptr[t] : target_ptr[t + 1]])
-        away = np.hypot(*(instance.points_xy[pool] - tour.points_xy[k]).T)
-        pool = pool[away > 0.0]
-        pick = pool[np.argsort(away[away > 0.0], kind="stable")[:ALTERNATIVES]]
-        found.append(instance.points_xy[pick])
-        owner.append(np.full(len(pick), k, dtype=np.int64))
-    if not found:
+    xy, own = viewpoints_seeing(instance, tour.points_xy, tour.sees, ALTERNATIVES)
+    if own.size == 0:
         return None
-    xy, own = np.vstack(found), np.concatenate(owner)
     check = check_site(site, area, settings)
     home = np.asarray(site.home_xy, dtype=np.float64)
     # Candidates lie on the edge of what they see, where the tolerance ring leaves it: each

@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.problem.flight_time import FlightModel
+from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers import _route_kernels as kernels
 from urpt_gcs.solvers._route_kernels import RUIN_MAX
 
@@ -48,6 +49,7 @@ __all__ = [
     "RouteSearch",
     "route_times",
     "search_routes",
+    "viewpoints_seeing",
     "warm_up",
 ]
 
@@ -200,6 +202,35 @@ def search_routes(
     if total >= start_total or float(exact.max()) > endurance_s:
         return result(routes, start_total, rounds, given_xy)
     return result(found, total, rounds, at)
+
+
+def viewpoints_seeing(
+    instance: Instance, stops_xy: FloatArray, sees: np.ndarray, count: int
+) -> tuple[FloatArray, IntArray]:
+    """For each stop, the ``count`` viewpoints of the instance nearest it (its own position
+    aside) that see every target of its row of ``sees``: their positions, and the stop each
+    is for (ascending). What they see from around them is the caller's to check."""
+    assert instance.points_xy is not None
+    covers = instance.covers
+    pair_viewpoint = np.repeat(np.arange(len(covers.ptr) - 1), np.diff(covers.ptr))
+    by_target = np.argsort(covers.target, kind="stable")
+    viewpoints_of = pair_viewpoint[by_target]
+    target_ptr = np.searchsorted(covers.target[by_target], np.arange(covers.n_targets + 1))
+    found: list[FloatArray] = [np.zeros((0, 2))]
+    owner: list[IntArray] = [np.zeros(0, dtype=np.int64)]
+    for k, row in enumerate(np.asarray(sees, dtype=bool)):
+        targets = np.flatnonzero(row)
+        if targets.size == 0:
+            continue
+        pool = viewpoints_of[target_ptr[targets[0]] : target_ptr[targets[0] + 1]]
+        for t in targets[1:].tolist():
+            pool = np.intersect1d(pool, viewpoints_of[target_ptr[t] : target_ptr[t + 1]])
+        away = np.hypot(*(instance.points_xy[pool] - stops_xy[k]).T)
+        pool, away = pool[away > 0.0], away[away > 0.0]
+        pick = pool[np.argsort(away, kind="stable")[:count]]
+        found.append(instance.points_xy[pick])
+        owner.append(np.full(len(pick), k, dtype=np.int64))
+    return np.vstack(found), np.concatenate(owner)
 
 
 @functools.cache
