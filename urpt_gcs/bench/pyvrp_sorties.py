@@ -4,8 +4,9 @@ least total flight time.
 Our planning solves one GTSP tour over the candidate viewpoints
 (:func:`urpt_gcs.solvers.registry.solve`) and then searches its sorties
 (:func:`urpt_gcs.flight.sorties.order_sorties`: the order for its cut, then the sorties as
-routes, each stop flyable from the nearest other viewpoints that see what it sees). PyVRP (an optional dependency, the ``bench``
-extra) solves the same question as a vehicle-routing problem:
+routes, each stop flyable from the nearest other viewpoints that see what it sees). PyVRP
+(an optional dependency, the ``bench`` extra) solves the same question as a vehicle-routing
+problem:
 
 - home is the one depot and every sortie is a vehicle of one type, as many available as there
   are targets (each target alone fits a sortie, or the plan is refused);

@@ -111,15 +111,21 @@ def sorties_and_missions(
     """
     endurance = None if settings.endurance_min is None else settings.endurance_min * 60.0
     budget = SEARCH_SHARE * settings.solve.time_limit_s
+    model = flight_model(settings)
     stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
     alternatives = None
-    if instance is not None and endurance is not None:
-        alternatives = _alternatives(site, area, instance, tour, settings)
+    if instance is not None and tour.points_xy is not None and endurance is not None:
+        # Only a flight of several sorties is searched: one that fits flies as it is.
+        names = [""] * len(tour.sees)
+        rel = altitude_rel(area)
+        plain = split_sorties(tour.points_xy, site.home_xy, rel, model, endurance, names)
+        if len(plain) > 1:
+            alternatives = _alternatives(site, area, instance, tour, settings)
     searched, sortie_order = order_sorties(
         tour,
         site.home_xy,
         altitude_rel(area),
-        flight_model(settings),
+        model,
         endurance,
         [f"stop {k}" for k in range(1, len(tour.sees) + 1)],
         budget,
