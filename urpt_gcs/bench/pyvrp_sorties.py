@@ -311,7 +311,7 @@ def our_sorties(
     # Each stop may be flown from the other viewpoints of what it sees, as PyVRP chooses
     # among a group's clients (no terrain here: every viewpoint sees what it is given).
     others, owner = viewpoints_seeing(instance, tour.points_xy, tour.sees, ALTERNATIVES)
-    alternatives = (others, np.searchsorted(owner, np.arange(len(tour.sees) + 1)))
+    ptr = np.searchsorted(owner, np.arange(len(tour.sees) + 1))
     tour, _ = order_sorties(
         tour,
         home,
@@ -321,7 +321,7 @@ def our_sorties(
         names,
         wall_s - solve_s,
         seed,
-        alternatives,
+        lambda: (others, ptr),
     )
     assert tour.points_xy is not None
     cut = split_sorties(tour.points_xy, home, altitude_rel_m, model, endurance_s, names)

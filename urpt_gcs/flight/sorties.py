@@ -11,14 +11,16 @@ back. This stage improves what is flown, the total flight time of the sorties, i
 2. the sorties themselves (:func:`urpt_gcs.solvers.sortie_routes.search_routes`), from that
    order's cut: stops moved between sorties, tails exchanged, ruin and recreate.
 
-The stops are the solver's, with their margins and refinement; which viewpoint serves each
-target is not chosen again here.
+The stops are the solver's, with their margins and refinement; given alternatives (other
+positions that see what a stop must, checked by the caller), the route search may fly a stop
+from one of them instead.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -199,7 +201,7 @@ def order_sorties(
     names: list[str],
     budget_s: float,
     seed: int = 0,
-    alternatives: tuple[FloatArray, IntArray] | None = None,
+    alternatives: Callable[[], tuple[FloatArray, IntArray] | None] | None = None,
 ) -> tuple[Tour, SortieOrder | None]:
     """Reorder the tour's stops for the least total flight time once cut into sorties.
 
@@ -214,8 +216,9 @@ def order_sorties(
     seed
         Order in which the stops are visited by the search.
     alternatives
-        Other positions each stop may be flown from (see
-        :func:`~urpt_gcs.solvers.sortie_routes.search_routes`); None: each from where it is.
+        Gives the other positions each stop may be flown from (see
+        :func:`~urpt_gcs.solvers.sortie_routes.search_routes`); called only for a flight of
+        several sorties. None: each stop from where it is.
 
     Returns
     -------
@@ -228,6 +231,7 @@ def order_sorties(
     plain = split_sorties(xy, home_xy, altitude_rel_m, model, endurance_s, names)
     if endurance_s is None or len(plain) == 1:
         return tour, None
+    others = None if alternatives is None else alternatives()
     warm_up()  # compiled (or loaded) before the clock starts: the budget is the search's
     start = time.perf_counter()
     k = len(xy)
@@ -273,7 +277,7 @@ def order_sorties(
         [order[s.first : s.stop] for s in searched],
         budget_s - (time.perf_counter() - start),
         seed,
-        alternatives=alternatives,
+        alternatives=others,
     )
     moved = np.any(route_search.stops_xy != xy, axis=1)
     xy = route_search.stops_xy

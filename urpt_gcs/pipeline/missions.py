@@ -8,6 +8,7 @@ clearance over the terrain, and the height above ground stays within ``--max-agl
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -113,14 +114,12 @@ def sorties_and_missions(
     budget = SEARCH_SHARE * settings.solve.time_limit_s
     model = flight_model(settings)
     stages.say(f"ordering the stops for sorties (up to {budget:.1f} s)")
-    alternatives = None
-    if instance is not None and tour.points_xy is not None and endurance is not None:
-        # Only a flight of several sorties is searched: one that fits flies as it is.
-        names = [""] * len(tour.sees)
-        rel = altitude_rel(area)
-        plain = split_sorties(tour.points_xy, site.home_xy, rel, model, endurance, names)
-        if len(plain) > 1:
-            alternatives = _alternatives(site, area, instance, tour, settings)
+    # Checked on the terrain only if the flight needs several sorties.
+    alternatives = (
+        None
+        if instance is None
+        else functools.partial(_alternatives, site, area, instance, tour, settings)
+    )
     searched, sortie_order = order_sorties(
         tour,
         site.home_xy,

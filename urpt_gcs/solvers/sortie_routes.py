@@ -185,7 +185,7 @@ def search_routes(
 
     given_xy = xy.copy()
     if k < 2:
-        return routes, result(routes, start_total, 0, given_xy)[1]
+        return result(routes, start_total, 0, given_xy)
     links, times, near, leg = _prepare(
         xy, home_xy, altitude_rel_m, model, endurance_s, routes, leg_times, alternatives
     )
