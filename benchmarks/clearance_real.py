@@ -22,8 +22,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
-from independent import leg_clearances, load_raster, read_waypoints_file  # noqa: E402
-from test_plan import REAL_CASES, _valid_targets  # noqa: E402
+from support.independent import leg_clearances, load_raster, read_waypoints_file  # noqa: E402
+from support.targets import REAL_CASES, valid_targets  # noqa: E402
 
 from urpt_gcs.files.products import write_products  # noqa: E402
 from urpt_gcs.pipeline.planner import plan  # noqa: E402
@@ -61,7 +61,7 @@ def main() -> None:
     )
     for name, count, box_m in REAL_CASES:
         dem = shared / name
-        targets = _valid_targets(dem, count, seed=3, box_m=box_m)
+        targets = valid_targets(dem, count, seed=3, box_m=box_m)
         with tempfile.TemporaryDirectory() as tmp:
             csv = Path(tmp) / "targets.csv"
             csv.write_text(

@@ -24,7 +24,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
-from test_plan import _valid_targets  # noqa: E402
+from support.targets import valid_targets  # noqa: E402
 
 from urpt_gcs.pipeline.fleet import fleet_problem  # noqa: E402
 from urpt_gcs.pipeline.settings import (  # noqa: E402
@@ -56,7 +56,7 @@ def main() -> None:
     dem = REPO.parent / "shared" / "dem" / args.raster
     if not dem.exists():
         sys.exit(f"no raster at {dem}: this benchmark needs ../shared/dem")
-    targets = _valid_targets(dem, args.targets, seed=args.seed, box_m=args.box)
+    targets = valid_targets(dem, args.targets, seed=args.seed, box_m=args.box)
     settings = PlanSettings(solve=SolveSettings(time_limit_s=args.time_limit, seed=args.seed))
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "targets.csv"

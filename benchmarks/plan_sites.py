@@ -20,7 +20,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
-from test_plan import REAL_CASES, _valid_targets  # noqa: E402
+from support.targets import REAL_CASES, valid_targets  # noqa: E402
 
 from urpt_gcs.pipeline.planner import plan  # noqa: E402
 from urpt_gcs.pipeline.settings import PlanSettings  # noqa: E402
@@ -63,7 +63,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name, count, box in REAL_CASES:
             dem = REPO.parent / "shared" / "dem" / name
-            pts = _valid_targets(dem, args.count or count, seed=3, box_m=box)
+            pts = valid_targets(dem, args.count or count, seed=3, box_m=box)
             csv = Path(tmp) / f"{name}.csv"
             csv.write_text("name,lat,lon\n" + "".join(f"{n},{a:.9f},{b:.9f}\n" for n, a, b in pts))
             run(name, dem, csv, settings)

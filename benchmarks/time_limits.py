@@ -26,7 +26,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
-from test_plan import _valid_targets  # noqa: E402
+from support.targets import valid_targets  # noqa: E402
 
 from urpt_gcs.errors import UrptError  # noqa: E402
 from urpt_gcs.pipeline.planner import plan  # noqa: E402
@@ -95,7 +95,7 @@ def main() -> None:
     dem = DEMO / "site.tif"
     with tempfile.TemporaryDirectory() as tmp:
         forty = Path(tmp) / "forty.csv"
-        points = _valid_targets(dem, 40, seed=3)
+        points = valid_targets(dem, 40, seed=3)
         forty.write_text("name,lat,lon\n" + "".join(f"{n},{a:.9f},{b:.9f}\n" for n, a, b in points))
         for site, targets in (("demo (16 targets)", DEMO / "targets.kml"), ("40 targets", forty)):
             for solver in SOLVERS:

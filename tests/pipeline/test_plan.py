@@ -17,7 +17,7 @@ from support.independent import (
     read_waypoints_file,
     sees,
 )
-from support.targets import kml_targets, valid_targets
+from support.targets import REAL_CASES, kml_targets, valid_targets
 
 from urpt_gcs.files.products import write_products
 from urpt_gcs.pipeline.planner import plan
@@ -67,14 +67,6 @@ def test_demo_plan_sees_every_target_and_clears_every_leg(tmp_path: Path) -> Non
     length = geod.line_length(lons, lats)
     assert length == pytest.approx(summary["tour_length_m"], rel=2e-3)
     assert summary["lower_bound_m"] <= summary["tour_length_m"]
-
-
-REAL_CASES = [
-    ("odm_dsm_utm51n.tif", 10, None),
-    ("codem_aoi_dsm_utm16n_egm2008.tif", 10, None),
-    ("pysheds_dem_wgs84.tif", 8, 2000.0),
-    ("dsm2dtm_drone_dsm_wgs84.tif", 6, None),
-]
 
 
 def test_300_targets_on_the_demo_plan_and_check(tmp_path: Path) -> None:

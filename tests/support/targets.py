@@ -12,6 +12,15 @@ import rasterio
 from support.independent import load_raster
 from urpt_gcs.site.targets import read_targets
 
+# The real rasters beside the checkout that plans are tried on: the raster, how many
+# targets, and the width of the box they are kept to (None: the whole raster).
+REAL_CASES = [
+    ("odm_dsm_utm51n.tif", 10, None),
+    ("codem_aoi_dsm_utm16n_egm2008.tif", 10, None),
+    ("pysheds_dem_wgs84.tif", 8, 2000.0),
+    ("dsm2dtm_drone_dsm_wgs84.tif", 6, None),
+]
+
 
 def kml_targets(path: Path) -> list[tuple[str, float, float]]:
     ts = read_targets(path)
