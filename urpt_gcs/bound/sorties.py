@@ -29,23 +29,29 @@ sortie. With what the pieces outside need, for every ``rho``:
 is flown at the return speed, the rest at the cruise speed (each leg no faster than its
 length over its speed): its time is at least ``ends + stops * stop + h * length`` with
 ``h = min(1 / cruise, (1 / cruise + 1 / return) / 2)`` and ``ends`` the take-off and the
-landing. Legs also speed up and brake: a leg of at least ``delta`` (the length from which it
-reaches the cruise speed) takes exactly ``c`` more than its length over the speed. Take
-regions whose circles lie at least ``delta`` apart, ``Q`` of them: the stops that photograph
-them are at least ``delta`` apart, and within a sortie the legs and stops from one such stop
-to the next take at least one leg of their total length (a rest-to-rest leg's time is
-subadditive: two legs flown one after the other, stopping between, are one way of flying
-their sum). So the sorties' legs take at least ``(Q - K) * c`` beyond their length's share,
-and the count above holds with ``Q * c`` added to the work and ``c`` to what each sortie
-holds. The total flight time is at least
-``K * ends + max(K, S) * stop + max(Q - K, 0) * c + h * L``, at the least over the counts
-``K`` the bound allows.
+landing. The stops are at least ``S``: weights on the regions' circles such that the circles
+through any one point weigh at most 1 together (:func:`~urpt_gcs.bound.geometric.stop_packing`)
+sum to at most the number of stops, and those of the regions beyond a radius to at most the
+stops that photograph them. Legs also speed up and brake: a leg of length ``d`` takes
+``f(d)`` more than its length over the cruise speed, ``f(d) = c`` exactly from the length
+``delta`` at which it reaches the cruise speed, and ``F(g)``, the least of ``f`` over lengths
+of at least ``g``, for every leg of at least ``g``. Take regions whose circles lie at least
+``g`` apart, ``Q_g`` of them: the stops that photograph them are at least ``g`` apart, and
+within a sortie the legs and stops from one such stop to the next take at least one leg of
+their total length (a rest-to-rest leg's time is subadditive: two legs flown one after the
+other, stopping between, are one way of flying their sum). So the sorties' legs take at
+least ``(Q_g - K) * F(g)`` beyond their length's share, for each of a few gaps ``g`` up to
+``delta``, and the count above holds with ``Q_g * F(g)`` added to the work and ``F(g)`` to
+what each sortie holds. The total flight time is at least
+``K * ends + max(K, S) * stop + max_g max(Q_g - K, 0) * F(g) + h * L``, at the least over the
+counts ``K`` the bound allows.
 
 Nothing here sees a raster: regions are centres, reaches and distances from home.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -55,6 +61,7 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import stop_packing
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.problem.regions import OuterStar
 
@@ -62,7 +69,9 @@ __all__ = [
     "DENSE_MAX_REGIONS",
     "THRESHOLDS",
     "SortieBound",
+    "CHAIN_GAPS",
     "SortieBudget",
+    "least_extra_s",
     "sortie_bound",
     "star_distances",
 ]
@@ -73,6 +82,12 @@ THRESHOLDS = 48
 # Up to this many regions the spanning trees use every pair's distance; above, the widest
 # reach for every region, whose tree lies in the centres' Delaunay triangulation.
 DENSE_MAX_REGIONS = 400
+# The gaps, as shares of the length from which a leg reaches the cruise speed, at which the
+# stops far apart are counted for what their legs spend speeding up and braking: the best
+# gap depends on how the regions lie, and each costs one greedy pass over them.
+CHAIN_GAPS = (1.0 / 16.0, 1.0 / 8.0, 1.0 / 4.0, 1.0 / 2.0, 3.0 / 4.0, 1.0)
+# Steps of the least leg overhead's search between a gap and the cruise length.
+_EXTRA_STEPS = 512
 # Rounding slack: a count within this of an integer is not rounded up past it.
 _EPS = 1e-9
 
@@ -91,17 +106,16 @@ class SortieBudget:
         What every stop costs on top of its legs.
     per_metre_s
         Least time per metre flown over a whole sortie (see the module's text).
-    leg_from_m, leg_extra_s
-        A leg at least ``leg_from_m`` long takes ``leg_extra_s`` more than its length over
-        the cruise speed (speeding up and braking); infinite and 0 to leave that out.
+    chains
+        Pairs ``(g, F)``: every leg at least ``g`` long takes at least ``F`` more than its
+        length over the cruise speed (speeding up and braking); none to leave that out.
     """
 
     endurance_s: float
     ends_s: float
     stop_s: float
     per_metre_s: float
-    leg_from_m: float = math.inf
-    leg_extra_s: float = 0.0
+    chains: tuple[tuple[float, float], ...] = ()
 
     @classmethod
     def of(cls, model: FlightModel, altitude_rel_m: float, endurance_s: float) -> SortieBudget:
@@ -124,8 +138,9 @@ class SortieBudget:
         cruise = 1.0 / model.cruise_m_s
         per_metre = min(cruise, 0.5 * (cruise + 1.0 / model.return_m_s))
         ends = model.takeoff_s(altitude_rel_m) + model.landing_s(altitude_rel_m)
-        leg_from, leg_extra = model.cruise_overhead()
-        return cls(endurance_s, ends, model.stop_s, per_metre, leg_from, leg_extra)
+        leg_from, _ = model.cruise_overhead()
+        chains = tuple((g * leg_from, least_extra_s(model, g * leg_from)) for g in CHAIN_GAPS)
+        return cls(endurance_s, ends, model.stop_s, per_metre, chains)
 
     @property
     def length_m(self) -> float:
@@ -150,6 +165,15 @@ class SortieBound:
         The single-tour bound it started from.
     radius_m
         The radius whose count of far sorties gave ``length_m`` (0: the single-tour bound).
+    stops
+        How many stops at least.
+    spread
+        Per gap, ``(Q, F)``: stops at least that far apart, and what each chain of legs
+        between two of them spends beyond its length's share.
+    ends_s, stop_s
+        What each sortie spends on its take-off and landing, and each stop.
+    length_s
+        The least time of ``length_m`` at the speeds.
     """
 
     length_m: float
@@ -157,6 +181,57 @@ class SortieBound:
     sorties: int
     single_m: float
     radius_m: float
+    stops: int = 0
+    spread: tuple[tuple[int, float], ...] = ()
+    ends_s: float = 0.0
+    stop_s: float = 0.0
+    length_s: float = 0.0
+
+    def total_s(self, count: int) -> float:
+        """The least total flight time of ``count`` sorties (of at least
+        :attr:`sorties`), by the module's text."""
+        return (
+            count * self.ends_s
+            + max(count, self.stops) * self.stop_s
+            + max((max(q - count, 0) * extra for q, extra in self.spread), default=0.0)
+            + self.length_s
+        )
+
+    def least_s(self, at_least: int) -> float:
+        """The least total flight time of any number of sorties from ``at_least`` (and from
+        :attr:`sorties`) up: piecewise linear in the count and rising past its last corner,
+        it is least at one of them."""
+        first = max(at_least, self.sorties)
+        corners = {first, self.stops, *(q for q, _ in self.spread)}
+        return min(self.total_s(k) for k in corners if k >= first)
+
+
+def least_extra_s(model: FlightModel, gap_m: float) -> float:
+    """A lower bound of what a level leg at least ``gap_m`` long takes beyond its length
+    over the cruise speed.
+
+    From the cruise length on it is the cruise overhead exactly. Below, the lengths from
+    ``gap_m`` up are cut into steps: a leg's time only grows with its length, so on a step
+    ``[a, b]`` the leg takes at least ``leg_s(a) - b / cruise`` beyond its length's share.
+
+    Parameters
+    ----------
+    model
+        The vehicle's flight model.
+    gap_m
+        The least length of the legs.
+
+    Returns
+    -------
+    float
+        Seconds, never negative.
+    """
+    leg_from, extra = model.cruise_overhead()
+    if not math.isfinite(leg_from) or gap_m >= leg_from:
+        return float(extra)
+    d = np.linspace(max(gap_m, 0.0), leg_from, _EXTRA_STEPS + 1)
+    steps = np.asarray(model.leg_s(d[:-1])) - d[1:] / model.cruise_m_s
+    return float(max(min(float(steps.min()), extra), 0.0))
 
 
 def star_distances(stars: tuple[OuterStar, ...], home_xy: tuple[float, float]) -> FloatArray:
@@ -249,8 +324,27 @@ def sortie_bound(
     pair = _PairDistances(xy, reach)
     # Regions apart, chosen farthest first: those beyond any radius are apart too.
     farthest = np.argsort(-r, kind="stable")
-    stop_r = np.sort(r[farthest[_apart(xy[farthest], reach[farthest], 0.0)]])
-    spread_r = np.sort(r[farthest[_apart(xy[farthest], reach[farthest], budget.leg_from_m)]])
+    apart_r = np.sort(r[farthest[_apart(xy[farthest], reach[farthest], 0.0)]])
+    weights = stop_packing(xy, reach)
+    by_r = np.argsort(r, kind="stable")
+    weight_r, beyond_w = r[by_r], np.cumsum(weights[by_r][::-1])[::-1]
+    chains = [
+        (np.sort(r[farthest[_apart(xy[farthest], reach[farthest], gap)]]), extra)
+        for gap, extra in budget.chains
+        if extra > 0.0
+    ]
+
+    def beyond(rho: float) -> tuple[float, list[tuple[int, float]]]:
+        """Stops at least, and per gap the regions apart, beyond ``rho``."""
+        first = int(np.searchsorted(weight_r, rho, side="left"))
+        packed = float(beyond_w[first]) if first < beyond_w.size else 0.0
+        apart = apart_r.size - int(np.searchsorted(apart_r, rho, side="left"))
+        spread = [
+            (far_r.size - int(np.searchsorted(far_r, rho, side="left")), extra)
+            for far_r, extra in chains
+        ]
+        return max(float(apart), packed), spread
+
     counts = np.zeros(radii.size)
     trees = np.zeros(radii.size)
     for m, rho in enumerate(radii.tolist()):
@@ -259,9 +353,8 @@ def sortie_bound(
             continue
         trees[m] = pair.tree(far, r[far] - rho)
         work = max(trees[m], single_m) if rho == 0.0 else trees[m]
-        stops = stop_r.size - int(np.searchsorted(stop_r, rho, side="left"))
-        spread = spread_r.size - int(np.searchsorted(spread_r, rho, side="left"))
-        counts[m] = _far_sorties(work, rho, stops, spread, budget)
+        stops_far, spread_far = beyond(rho)
+        counts[m] = _far_sorties(work, rho, stops_far, spread_far, budget)
     # A sortie that reaches past a radius reaches past every smaller one too; and every
     # sortie reaches the nearest region, so up to its distance all of them count.
     counts = np.maximum.accumulate(counts[::-1])[::-1]
@@ -273,33 +366,38 @@ def sortie_bound(
         if inside + trees[m] > best:
             best, at = inside + trees[m], float(radii[m])
     sorties = int(counts[0])
-    stops, spread = stop_r.size, spread_r.size
+    packed, spread = beyond(0.0)
+    out = SortieBound(
+        length_m=float(best),
+        flight_time_s=0.0,
+        sorties=int(counts[0]),
+        single_m=float(single_m),
+        radius_m=at,
+        stops=math.ceil(packed - _EPS),
+        spread=tuple(spread),
+        ends_s=budget.ends_s,
+        stop_s=budget.stop_s,
+        length_s=budget.per_metre_s * float(best),
+    )
+    return dataclasses.replace(out, flight_time_s=float(out.least_s(out.sorties)))
 
-    def total_s(k: int) -> float:
-        return (
-            k * budget.ends_s
-            + max(k, stops) * budget.stop_s
-            + max(spread - k, 0) * budget.leg_extra_s
-            + budget.per_metre_s * best
-        )
 
-    # Linear in the count between these, rising past the last: its least is at one of them.
-    time_s = min(total_s(k) for k in (sorties, stops, spread) if k >= sorties)
-    return SortieBound(float(best), float(time_s), sorties, float(single_m), at)
-
-
-def _far_sorties(work_m: float, rho: float, stops: int, spread: int, budget: SortieBudget) -> int:
+def _far_sorties(
+    work_m: float, rho: float, stops: float, spread: list[tuple[int, float]], budget: SortieBudget
+) -> int:
     """How many sorties at least photograph the regions beyond ``rho``, which need
-    ``work_m`` of flight outside the disc of that radius, ``stops`` stops and ``spread`` stops
-    whose legs between them reach the cruise speed."""
-    h, c = budget.per_metre_s, budget.leg_extra_s
+    ``work_m`` of flight outside the disc of that radius and ``stops`` stops, with per gap
+    ``(Q, F)`` the stops that far apart and what each chain between them spends beyond its
+    length's share."""
+    h = budget.per_metre_s
     one_stop = budget.endurance_s - budget.ends_s - budget.stop_s - 2.0 * h * rho
-    all_stops = budget.endurance_s - budget.ends_s - 2.0 * h * rho + c
     if one_stop <= 0.0:
         # No sortie can reach that far and photograph: no plan exists, and none is bounded.
         return 1
-    work_s = stops * budget.stop_s + spread * c + h * work_m
-    need = max(h * work_m / one_stop, work_s / all_stops, 1.0)
+    holds = budget.endurance_s - budget.ends_s - 2.0 * h * rho
+    need = max(h * work_m / one_stop, (stops * budget.stop_s + h * work_m) / holds, 1.0)
+    for q, extra in spread:
+        need = max(need, (stops * budget.stop_s + q * extra + h * work_m) / (holds + extra))
     return math.ceil(need - _EPS)
 
 
