@@ -17,6 +17,7 @@ from conftest import DEMO, REAL_DEMS, needs_shared
 from support.independent import check_mission, load_raster, read_waypoints_file
 from support.targets import valid_targets
 
+from urpt_gcs.bound.sorties import sortie_bound
 from urpt_gcs.cli import main
 from urpt_gcs.pipeline.separation import Track, closest, pair_closest, timing_slack_s
 from urpt_gcs.problem.flight_time import FlightModel
@@ -25,17 +26,17 @@ from urpt_gcs.site.targets import read_targets
 from urpt_gcs.solvers import solve
 from urpt_gcs.solvers.base import SolveSettings
 from urpt_gcs.solvers.fleet import Vehicle, restrict, solve_fleet
-from urpt_gcs.solvers.fleet_bound import makespan_bound
+from urpt_gcs.solvers.fleet_bound import fleet_budget, makespan_bound
 
 ALTITUDE_M = 40.0
 FOV_DEG = 30.0
 
 
 def _tiny_fleet(
-    seed: int, vehicles: int, endurance_s: float | None = None
+    seed: int, vehicles: int, endurance_s: float | None = None, one_home: bool = False
 ) -> tuple[list[Vehicle], Instance]:
     """Four targets, two viewpoints each inside the cone (a viewpoint sees every target
-    whose cone holds it), and homes of their own."""
+    whose cone holds it), and homes of their own (or the first vehicle's for all)."""
     rng = np.random.default_rng(seed)
     targets = rng.uniform(0.0, 400.0, (4, 2))
     cone = ALTITUDE_M * math.tan(math.radians(FOV_DEG))
@@ -48,6 +49,8 @@ def _tiny_fleet(
     vp, tg = np.nonzero(near)
     geometry = Geometry(targets, np.zeros(4), ALTITUDE_M, FOV_DEG, 0.0)
     homes = rng.uniform(0.0, 400.0, (vehicles, 2))
+    if one_home:
+        homes[:] = homes[0]
     out = []
     for k in range(vehicles):
         inst = Instance.from_cover_pairs(
@@ -58,10 +61,12 @@ def _tiny_fleet(
     return out, out[0].instance
 
 
-def _brute_makespan(vehicles: list[Vehicle]) -> float:
+def _brute_makespan(vehicles: list[Vehicle], offsets_s: tuple[float, ...] | None = None) -> float:
     """All assignments of the targets to the vehicles, each vehicle's least flight time over
     every sequence of distinct viewpoints that sees its share (a share of s targets never
-    needs more than s stops, and a stop left out never lengthens a flight)."""
+    needs more than s stops, and a stop left out never lengthens a flight), after its start
+    delay in ``offsets_s``."""
+    offsets = offsets_s or (0.0,) * len(vehicles)
     m = vehicles[0].instance.n_targets
     best = []
     for vehicle in vehicles:
@@ -86,7 +91,10 @@ def _brute_makespan(vehicles: list[Vehicle]) -> float:
         masks = [0] * len(vehicles)
         for t, k in enumerate(assignment):
             masks[k] |= 1 << t
-        value = min(value, max(best[k][masks[k]] for k in range(len(vehicles))))
+        value = min(
+            value,
+            max(offsets[k] + best[k][masks[k]] if masks[k] else 0.0 for k in range(len(vehicles))),
+        )
     return value
 
 
@@ -115,6 +123,68 @@ def test_bound_and_planned_makespan_bracket_the_brute_force_optimum(
     assert seen.all()
     # The search never ends worse than where it started.
     assert tours.makespan_s <= max(tours.start_times_s) + 1e-9
+
+
+@pytest.mark.parametrize(
+    ("seed", "offsets_s"), [(0, (60.0, 0.0)), (3, (0.0, 90.0, 30.0)), (7, (0.0, 150.0))]
+)
+def test_start_delays_are_counted_by_the_search_and_the_naive_split(
+    seed: int, offsets_s: tuple[float, ...]
+) -> None:
+    """A vehicle that starts late ends later: the search shares the targets with that
+    counted, never ending after the naive split started with the same delays, nor before
+    the brute-force optimum with them."""
+    vehicles, reference = _tiny_fleet(seed, len(offsets_s))
+    optimum = _brute_makespan(vehicles, offsets_s)
+    single = solve(reference, "exact", SolveSettings(time_limit_s=0.5))
+    tours = solve_fleet(
+        vehicles, single.order, reference, "exact", SolveSettings(time_limit_s=1.0), offsets_s
+    )
+    assert tours.offsets_s == offsets_s
+    finish = max(
+        (
+            o + t
+            for o, t, order in zip(offsets_s, tours.times_s, tours.orders, strict=True)
+            if order
+        ),
+        default=0.0,
+    )
+    assert tours.makespan_s >= finish - 1e-9
+    assert tours.makespan_s >= optimum - 1e-6
+    assert tours.makespan_s <= tours.naive_makespan_s + 1e-9
+    # Held back long enough, the late vehicle flies less than the others.
+    late = int(np.argmax(offsets_s))
+    others = [t for k, t in enumerate(tours.times_s) if k != late]
+    if offsets_s[late] >= 90.0:
+        assert tours.times_s[late] <= max(others) + 1e-9
+
+
+@pytest.mark.parametrize(
+    ("seed", "count", "endurance_s"),
+    [(0, 2, None), (3, 3, None), (2, 2, 200.0), (7, 2, 180.0), (8, 3, 230.0), (5, 2, 150.0)],
+)
+def test_sortie_share_of_the_bound_stays_under_the_brute_force_optimum(
+    seed: int, count: int, endurance_s: float | None
+) -> None:
+    """Vehicles of different speeds from one home: the sorties' bound over the targets'
+    cone discs, within the fleet's weakest budget, shared among them, is under the
+    optimum and adds to the other parts where they are weak."""
+    vehicles, reference = _tiny_fleet(seed, count, endurance_s, one_home=True)
+    optimum = _brute_makespan(vehicles)
+    single = solve(reference, "exact", SolveSettings(time_limit_s=0.5))
+    g = reference.geometry
+    assert g is not None and reference.depot_xy is not None
+    reach = g.cone_radius_m
+    home = np.asarray(reference.depot_xy)
+    distance = np.maximum(np.hypot(*(g.targets_xy - home).T) - reach, 0.0)
+    sorties = sortie_bound(
+        g.targets_xy, reach, distance, single.lower_bound, fleet_budget(vehicles)
+    )
+    bound = makespan_bound(vehicles, single.lower_bound, sorties)
+    without = makespan_bound(vehicles, single.lower_bound)
+    assert 0.0 < bound.sorties_s <= optimum + 1e-6
+    assert bound.bound_s <= optimum + 1e-6
+    assert bound.bound_s >= without.bound_s
 
 
 @pytest.mark.parametrize(

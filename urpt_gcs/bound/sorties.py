@@ -66,10 +66,10 @@ from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.problem.regions import OuterStar
 
 __all__ = [
+    "CHAIN_GAPS",
     "DENSE_MAX_REGIONS",
     "THRESHOLDS",
     "SortieBound",
-    "CHAIN_GAPS",
     "SortieBudget",
     "least_extra_s",
     "sortie_bound",
@@ -365,7 +365,6 @@ def sortie_bound(
         inside += 2.0 * counts[m] * (radii[m] - radii[m - 1])
         if inside + trees[m] > best:
             best, at = inside + trees[m], float(radii[m])
-    sorties = int(counts[0])
     packed, spread = beyond(0.0)
     out = SortieBound(
         length_m=float(best),

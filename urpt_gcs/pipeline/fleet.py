@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.certificate import bound_time_s
 from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.pipeline.area import (
@@ -35,6 +36,7 @@ from urpt_gcs.pipeline.area import (
     read_area,
     read_site,
 )
+from urpt_gcs.pipeline.improve import certify_flight
 from urpt_gcs.pipeline.missions import flight_model
 from urpt_gcs.pipeline.planner import finish_plan
 from urpt_gcs.pipeline.result import Plan
@@ -54,7 +56,7 @@ from urpt_gcs.solvers.fleet import (
     solve_fleet,
     with_home,
 )
-from urpt_gcs.solvers.fleet_bound import MakespanBound, makespan_bound
+from urpt_gcs.solvers.fleet_bound import MakespanBound, fleet_budget, makespan_bound
 from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
 
@@ -246,7 +248,7 @@ def plan_fleet(
         )
     stages = Stages(progress)
     problem = fleet_problem(dem_path, targets_path, settings, fleet, stages)
-    layers, vehicles, reference = problem.layers, list(problem.vehicles), problem.reference
+    vehicles, reference = list(problem.vehicles), problem.reference
     solver = choose(reference, settings.solver)
     stages.say(f"preparing the {solver} solver (compiled on first use)")
     prepare(solver)
@@ -263,26 +265,18 @@ def plan_fleet(
     stages.lap("single")
     budget = settings.solve.time_limit_s - single_s
     stages.say(f"sharing the targets among {len(vehicles)} vehicles (up to {budget:.1f} s)")
-    tours = solve_fleet(
-        vehicles,
-        single.order,
-        reference,
-        settings.solver,
-        SolveSettings(budget, settings.solve.seed),
-    )
-    stages.lap("fleet")
-    idle = [k + 1 for k, share in enumerate(tours.targets) if not share]
-    if idle:
-        raise SettingsError.about(
-            "vehicle {number} has nothing left to photograph (the others' stops see all its "
-            "targets): use fewer vehicles ({vehicles} or {fleet_file})",
-            number=idle[0],
-        )
-    bound = makespan_bound(vehicles, problem.single_bound_m)
-    plans = tuple(_vehicle_plan(k, layer, tours, solver, stages) for k, layer in enumerate(layers))
-    stages.say("checking separation along the planned tracks")
-    separation = separate(plans, fleet, problem.site.crs)
-    stages.lap("separation")
+    search = SolveSettings(budget, settings.solve.seed)
+    solvers = (settings.solver, solver)
+    tours, plans, separation = _shared(problem, fleet, single.order, solvers, search, None, stages)
+    delays = separation.start_delays_s
+    if max(delays) > 0.0:
+        # The start delays come from the tracks: shared out again with them counted, a
+        # vehicle held back gets less to fly. Kept if the last landing is earlier.
+        stages.say("sharing the targets again with the start delays counted")
+        again = _shared(problem, fleet, single.order, solvers, search, delays, stages)
+        if _last_landing(again[1], again[2]) < _last_landing(plans, separation):
+            tours, plans, separation = again
+    bound = _makespan_bound(problem, single.length, settings, stages)
     result = FleetPlan(
         settings=settings,
         fleet=fleet,
@@ -302,6 +296,66 @@ def plan_fleet(
             f"bound {bound.bound_s:.1f} s; report this"
         )
     return result
+
+
+def _shared(
+    problem: FleetProblem,
+    fleet: FleetSettings,
+    single_order: tuple[int, ...],
+    solvers: tuple[str, str],
+    search: SolveSettings,
+    offsets_s: tuple[float, ...] | None,
+    stages: Stages,
+) -> tuple[FleetTours, tuple[Plan, ...], Separation]:
+    """The targets shared out (each vehicle's start delay counted), every vehicle's plan
+    and the start delays that keep them apart. ``solvers``: the setting the search re-solves
+    with, and the solver the single tour came from."""
+    tours = solve_fleet(
+        problem.vehicles, single_order, problem.reference, solvers[0], search, offsets_s
+    )
+    stages.lap("fleet")
+    idle = [k + 1 for k, share in enumerate(tours.targets) if not share]
+    if idle:
+        raise SettingsError.about(
+            "vehicle {number} has nothing left to photograph (the others' stops see all its "
+            "targets): use fewer vehicles ({vehicles} or {fleet_file})",
+            number=idle[0],
+        )
+    plans = tuple(
+        _vehicle_plan(k, layer, tours, solvers[1], stages) for k, layer in enumerate(problem.layers)
+    )
+    stages.say("checking separation along the planned tracks")
+    separation = separate(plans, fleet, problem.site.crs)
+    stages.lap("separation")
+    return tours, plans, separation
+
+
+def _last_landing(plans: tuple[Plan, ...], separation: Separation) -> float:
+    return max(d + p.flight_time_s for d, p in zip(separation.start_delays_s, plans, strict=True))
+
+
+def _makespan_bound(
+    problem: FleetProblem, single_m: float, settings: PlanSettings, stages: Stages
+) -> MakespanBound:
+    """The fleet's makespan bound, with the certified bound of one flight over the highest
+    layer's outer stars (it holds for every layer when they nest) and, when every vehicle
+    flies from one home, the bound of sorties within the fleet's weakest budget."""
+    vehicles = problem.vehicles
+    if not (settings.certify and problem.monotone):
+        return makespan_bound(vehicles, problem.single_bound_m)
+    bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
+    stages.say(f"bounding the fleet's flights (up to {bound_s:.1f} s)")
+    top = max(problem.layers, key=lambda layer: layer.area.camera.altitude_m)
+    home = vehicles[0].home_xy
+    site = dataclasses.replace(top.site, home_xy=home)
+    one_home = all(v.home_xy == home for v in vehicles)
+    certificate = certify_flight(
+        site, top.area, problem.widest, single_m, single_m, bound_s, top.settings,
+        fleet_budget(vehicles),
+    )  # fmt: skip
+    stages.lap("bound")
+    single = max(certificate.single_flight_m, problem.single_bound_m or 0.0)
+    return makespan_bound(vehicles, single, certificate.sorties if one_home else None)
 
 
 def _vehicle_settings(

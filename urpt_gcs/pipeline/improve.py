@@ -118,6 +118,7 @@ def certify_flight(
     tour_m: float,
     time_limit_s: float,
     settings: PlanSettings,
+    budget: SortieBudget | None = None,
 ) -> Certificate:
     """The certified lower bound of every flight from home whose stops see every target from
     anywhere within the position tolerance of them, flown in sorties that each fit the
@@ -139,6 +140,8 @@ def certify_flight(
     settings
         The plan's settings: workers, the position tolerance (how far from its waypoint a
         stop still photographs), the endurance and the flight model's speeds.
+    budget
+        What one sortie may spend (None: the settings' vehicle's).
 
     Returns
     -------
@@ -159,8 +162,9 @@ def certify_flight(
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
     single = certify(regions, min(flown_m, tour_m), time_limit_s, also, ratio, tighten)
-    endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
-    budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
+    if budget is None:
+        endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
+        budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
     stars = regions.outer
     sorties = sortie_bound(
         np.asarray([s.center_xy for s in stars], dtype=np.float64).reshape(-1, 2),

@@ -32,7 +32,7 @@ class Stages:
         self._clock = time.perf_counter()
 
     def lap(self, name: str) -> None:
-        """Record the time since the last lap (or the start) as stage ``name``'s.
+        """Add the time since the last lap (or the start) to stage ``name``'s.
 
         Parameters
         ----------
@@ -40,7 +40,7 @@ class Stages:
             The stage just finished, as the plan's ``timings_s`` names it.
         """
         now = time.perf_counter()
-        self.timings_s[name] = now - self._clock
+        self.timings_s[name] = self.timings_s.get(name, 0.0) + now - self._clock
         self._clock = now
 
 

@@ -11,7 +11,9 @@ out, the targets only it saw are put on another vehicle (the cheapest insertion 
 of that vehicle's layer seeing each), and the move is kept when both new flights are shorter
 than the old longest one. When no move helps, every vehicle's GTSP is re-solved on its targets
 (the ordinary solvers, a short budget each); if that shortens any flight, the moves go on.
-Every value compared is the time of a real tour over the vehicles' own candidates.
+Every value compared is the time of a real tour over the vehicles' own candidates. A vehicle
+may be given a start delay (its offset): its flight then ends that much later, and the
+makespan the search shortens, like the naive split it starts from, counts it.
 
 Nothing here sees a raster: only instances, points, distances and the flight model.
 """
@@ -121,14 +123,21 @@ class FleetTours:
     moves: int
     resolves: int
     search_s: float
+    offsets_s: tuple[float, ...] = ()
+
+    def _finish(self, times_s: tuple[float, ...]) -> float:
+        offsets = self.offsets_s or (0.0,) * len(times_s)
+        return max(o + t for o, t in zip(offsets, times_s, strict=True))
 
     @property
     def makespan_s(self) -> float:
-        return max(self.times_s)
+        """When the last vehicle lands, its start delay included."""
+        return self._finish(self.times_s)
 
     @property
     def naive_makespan_s(self) -> float:
-        return max(self.naive_times_s)
+        """The same for the naive split, with the same start delays."""
+        return self._finish(self.naive_times_s)
 
 
 def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntArray]:
@@ -202,13 +211,19 @@ def with_home(instance: Instance, home_xy: tuple[float, float]) -> Instance:
 class _Route:
     """One vehicle's stops (viewpoints of its instance, in flight order) and its time."""
 
-    def __init__(self, vehicle: Vehicle, order: list[int]) -> None:
+    def __init__(self, vehicle: Vehicle, order: list[int], offset_s: float = 0.0) -> None:
         self.vehicle = vehicle
         inst = vehicle.instance
         assert inst.points_xy is not None
         self.points = inst.points_xy
         self.order = order
+        self.offset_s = offset_s
         self.time_s = vehicle.time_s(self.points[order])
+
+    @property
+    def finish_s(self) -> float:
+        """When it lands, from the first take-off: its start delay and its flight."""
+        return self.offset_s + self.time_s
 
     def seen(self) -> npt.NDArray[np.bool_]:
         return self.vehicle.instance.covers.seen(self.order)
@@ -235,9 +250,12 @@ def _insert(route: _Route, order: list[int], candidates: IntArray) -> list[int]:
     return [*order[:pos], int(candidates[i]), *order[pos:]]
 
 
-def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
+def _naive_cut(
+    vehicles: Sequence[Vehicle], stops_xy: FloatArray, offsets_s: Sequence[float]
+) -> list[int]:
     """Cut points ``0 = c_0 <= ... <= c_K = n`` of the stops into K contiguous pieces, piece
-    ``k`` flown by vehicle ``k`` in the given order from its home, the longest flight least.
+    ``k`` flown by vehicle ``k`` in the given order from its home after its start delay
+    ``offsets_s[k]``, the last landing earliest.
 
     A piece's time only grows as it takes in more stops at either end, so for a given longest
     flight the greedy cut (each vehicle in turn takes all it can) decides whether one exists;
@@ -257,7 +275,7 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
             # The largest j whose piece first .. j - 1 fits; a piece only grows with j.
             while lo < hi:
                 mid = (lo + hi + 1) // 2
-                if vehicle.time_s(stops_xy[first:mid]) <= limit_s:
+                if offsets_s[k] + vehicle.time_s(stops_xy[first:mid]) <= limit_s:
                     lo = mid
                 else:
                     hi = mid - 1
@@ -269,7 +287,7 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
     # At the longest flight of the whole tour every piece fits, unless a vehicle cannot fly
     # some stop within its endurance at all: then the cut must keep it off those stops.
     whole = [t for t in (v.time_s(stops_xy) for v in vehicles) if math.isfinite(t)]
-    low, high = 0.0, max(whole, default=math.inf)
+    low, high = 0.0, max(whole, default=math.inf) + max(offsets_s)
     found = greedy(high) if whole else None
     if found is None:
         raise SettingsError.about(
@@ -287,14 +305,19 @@ def _naive_cut(vehicles: Sequence[Vehicle], stops_xy: FloatArray) -> list[int]:
 
 
 def naive_split(
-    vehicles: Sequence[Vehicle], single_order: Sequence[int], reference: Instance
+    vehicles: Sequence[Vehicle],
+    single_order: Sequence[int],
+    reference: Instance,
+    offsets_s: Sequence[float] | None = None,
 ) -> tuple[list[list[int]], list[float], list[list[int]]]:
     """The single-vehicle tour (viewpoints of ``reference``) cut into K contiguous pieces of
-    least longest flight, each flown as cut from its vehicle's home: per vehicle the targets
-    first seen in its piece, the pieces' flight times and the pieces themselves."""
+    earliest last landing (after the start delays ``offsets_s``, none by default), each
+    flown as cut from its vehicle's home: per vehicle the targets first seen in its piece,
+    the pieces' flight times and the pieces themselves."""
     assert reference.points_xy is not None
     stops = reference.points_xy[list(single_order)]
-    cuts = _naive_cut(vehicles, stops)
+    offsets = [0.0] * len(vehicles) if offsets_s is None else list(offsets_s)
+    cuts = _naive_cut(vehicles, stops, offsets)
     covers = reference.covers.dense(list(single_order))
     first_seen = np.argmax(covers, axis=0)
     pieces, times, cut = [], [], []
@@ -312,6 +335,7 @@ def solve_fleet(
     reference: Instance,
     solver: str,
     settings: SolveSettings,
+    offsets_s: Sequence[float] | None = None,
 ) -> FleetTours:
     """Tours for the fleet of least makespan found within ``settings.time_limit_s``.
 
@@ -328,14 +352,23 @@ def solve_fleet(
         ``auto`` picks per vehicle).
     settings
         The search's time limit and seed.
+    offsets_s
+        Each vehicle's start delay, counted in the makespan (None: all start at once).
     """
     started = time.perf_counter()
     deadline = started + settings.time_limit_s
-    pieces, naive_times, cut = naive_split(vehicles, single_order, reference)
+    offsets = [0.0] * len(vehicles) if offsets_s is None else [float(o) for o in offsets_s]
+    if len(offsets) != len(vehicles):
+        raise ValueError("solve_fleet needs one offset per vehicle")
+
+    def finish(times: Sequence[float]) -> float:
+        return max(o + t for o, t in zip(offsets, times, strict=True))
+
+    pieces, naive_times, cut = naive_split(vehicles, single_order, reference, offsets)
     # The tour is a cycle: it is cut open at a few other stops too; the search descends from
     # the best few cuts in turn and goes on from the best it reaches.
     order = list(single_order)
-    cuts = [(max(naive_times), pieces, cut)]
+    cuts = [(finish(naive_times), pieces, cut)]
     for r in _ROTATIONS if len(vehicles) > 1 else ():
         if time.perf_counter() - started > _ROTATION_SHARE * settings.time_limit_s:
             break
@@ -343,10 +376,10 @@ def solve_fleet(
         if shift == 0:
             continue
         try:
-            tried = naive_split(vehicles, order[shift:] + order[:shift], reference)
+            tried = naive_split(vehicles, order[shift:] + order[:shift], reference, offsets)
         except SettingsError:
             continue  # no cut from there fits every endurance
-        cuts.append((max(tried[1]), tried[0], tried[2]))
+        cuts.append((finish(tried[1]), tried[0], tried[2]))
     cuts.sort(key=lambda c: c[0])
     by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
     resolves = 0
@@ -371,11 +404,13 @@ def solve_fleet(
     def begin(pieces: list[list[int]], cut: list[list[int]]) -> list[_Route]:
         routes = []
         for k, vehicle in enumerate(vehicles):
-            route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [])
+            route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [], offsets[k])
             # The piece as cut, on the vehicle's own viewpoints, if that is quicker: the
             # solvers shorten the length, not the time with its stops, and have little time.
             if cut[k]:
-                as_cut = _Route(vehicle, _carried(vehicle, cut[k], reference, by_target[k]))
+                as_cut = _Route(
+                    vehicle, _carried(vehicle, cut[k], reference, by_target[k]), offsets[k]
+                )
                 if as_cut.time_s < route.time_s:
                     route = as_cut
             routes.append(route)
@@ -389,7 +424,7 @@ def solve_fleet(
             moved = 0 if long_round else _move_stops(routes, by_target, until)
             moves += moved
             improved = False
-            turn = sorted(range(len(routes)), key=lambda k: -routes[k].time_s)
+            turn = sorted(range(len(routes)), key=lambda k: -routes[k].finish_s)
             for n, k in enumerate(turn):
                 left = until - time.perf_counter()
                 if left <= 0.0:
@@ -423,7 +458,7 @@ def solve_fleet(
         until = now + max(short_until - now, 0.0) / (len(starts) - n)
         moved, _ = descend(trial, max(until, now + budget), long_round=False)
         moves += moved
-        if not routes or max(r.time_s for r in trial) < max(r.time_s for r in routes):
+        if not routes or max(r.finish_s for r in trial) < max(r.finish_s for r in routes):
             routes = trial
     # The time left: a long round of re-solves, then moves again while they help.
     while time.perf_counter() < deadline:
@@ -444,6 +479,7 @@ def solve_fleet(
         moves=moves,
         resolves=resolves,
         search_s=time.perf_counter() - started,
+        offsets_s=tuple(offsets),
     )
 
 
@@ -530,12 +566,14 @@ def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline:
     long; the number of moves made. A vehicle keeps at least one stop."""
     moves = 0
     while time.perf_counter() < deadline:
-        c = int(np.argmax([r.time_s for r in routes]))
-        worst, critical = routes[c].time_s, routes[c]
+        c = int(np.argmax([r.finish_s for r in routes]))
+        worst, critical = routes[c].finish_s, routes[c]
         best: tuple[float, int, list[int], list[int]] | None = None
         for i, stop in enumerate(critical.order):
             rest = critical.order[:i] + critical.order[i + 1 :]
-            rest_s = critical.vehicle.time_s(critical.points[rest]) if rest else 0.0
+            rest_s = (
+                critical.offset_s + critical.vehicle.time_s(critical.points[rest]) if rest else 0.0
+            )
             if not rest or rest_s >= worst - _EPS_S:
                 continue
             lost = _lost(critical, stop, rest, _seen_except(routes, {c}))
@@ -543,7 +581,7 @@ def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline:
                 if j == c:
                     continue
                 order = _taking(other, list(other.order), lost, by_target[j])
-                value = max(rest_s, other.vehicle.time_s(other.points[order]))
+                value = max(rest_s, other.offset_s + other.vehicle.time_s(other.points[order]))
                 if value < worst - _EPS_S and (best is None or value < best[0]):
                     best = (value, j, rest, order)
         if best is None:
@@ -564,7 +602,7 @@ def _best_swap(
     """The best swap of a stop of vehicle ``c`` with one of the nearest stops of another
     vehicle that shortens ``c`` without making the other as long, or None."""
     critical = routes[c]
-    worst = critical.time_s
+    worst = critical.finish_s
     best: tuple[float, int, list[int], list[int]] | None = None
     for j, other in enumerate(routes):
         if j == c or not other.order:
@@ -594,13 +632,13 @@ def _best_swap(
                 mine = _taking(critical, mine_rest, lost_theirs, by_target[c])
                 if not mine:
                     continue
-                mine_s = critical.vehicle.time_s(critical.points[mine])
+                mine_s = critical.offset_s + critical.vehicle.time_s(critical.points[mine])
                 if mine_s >= worst - _EPS_S:
                     continue
                 theirs = _taking(other, their_rest, lost_mine, by_target[j])
                 if not theirs:
                     continue
-                value = max(mine_s, other.vehicle.time_s(other.points[theirs]))
+                value = max(mine_s, other.offset_s + other.vehicle.time_s(other.points[theirs]))
                 if value < worst - _EPS_S and (best is None or value < best[0]):
                     best = (value, j, mine, theirs)
     return best

@@ -1,5 +1,6 @@
 """A lower bound on the makespan of any fleet plan: the farthest target's out-and-back, the
-work shared among the vehicles, and the pigeonhole over targets far apart.
+work shared among the vehicles, the pigeonhole over targets far apart, and the sorties'
+bound shared among the vehicles.
 
 Nothing here sees a raster: only the vehicles' instances, their geometry and flight models.
 """
@@ -16,10 +17,17 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.geometric import greedy_disjoint
+from urpt_gcs.bound.sorties import CHAIN_GAPS, SortieBound, SortieBudget, least_extra_s
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.solvers.fleet import Vehicle
 
-__all__ = ["TREE_BOUND_MAX_TARGETS", "MakespanBound", "makespan_bound", "tree_bound_m"]
+__all__ = [
+    "TREE_BOUND_MAX_TARGETS",
+    "MakespanBound",
+    "fleet_budget",
+    "makespan_bound",
+    "tree_bound_m",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,10 +37,11 @@ class MakespanBound:
     reach_s: float
     share_s: float
     pigeonhole_s: float = 0.0
+    sorties_s: float = 0.0
 
     @property
     def bound_s(self) -> float:
-        return max(self.reach_s, self.share_s, self.pigeonhole_s)
+        return max(self.reach_s, self.share_s, self.pigeonhole_s, self.sorties_s)
 
 
 # Above this many targets the spanning-tree bound (a dense matrix) is left out.
@@ -64,7 +73,36 @@ def tree_bound_m(
     return max(float(minimum_spanning_tree(w).sum()) - 1e-9 * m, 0.0)
 
 
-def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) -> MakespanBound:
+def fleet_budget(vehicles: Sequence[Vehicle]) -> SortieBudget:
+    """What one sortie of any of the vehicles may spend at the most: the longest endurance,
+    and the least take-off and landing, stop, time per metre and, at every gap of any
+    vehicle's, leg overhead. Every vehicle's sorties are within it, so a bound of sorties
+    within it holds for all of theirs together."""
+    if not vehicles:
+        raise ValueError("fleet_budget needs at least one vehicle")
+    budgets = [
+        SortieBudget.of(
+            v.model, v.altitude_rel_m, math.inf if v.endurance_s is None else v.endurance_s
+        )
+        for v in vehicles
+    ]
+    gaps = sorted({g * v.model.cruise_overhead()[0] for v in vehicles for g in CHAIN_GAPS})
+    return SortieBudget(
+        endurance_s=max(b.endurance_s for b in budgets),
+        ends_s=min(b.ends_s for b in budgets),
+        stop_s=min(b.stop_s for b in budgets),
+        per_metre_s=min(b.per_metre_s for b in budgets),
+        chains=tuple(
+            (g, min(least_extra_s(v.model, g) for v in vehicles)) for g in gaps if math.isfinite(g)
+        ),
+    )
+
+
+def makespan_bound(
+    vehicles: Sequence[Vehicle],
+    single_bound_m: float | None,
+    sorties: SortieBound | None = None,
+) -> MakespanBound:
     """A lower bound on the makespan of any plan in which the vehicles between them see
     every target.
 
@@ -97,6 +135,13 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
     models).
 
     ``pigeonhole_s``: see :func:`_pigeonhole_s`.
+
+    ``sorties_s``: ``sorties`` (when given) bounds every set of sorties from the vehicles'
+    one home within :func:`fleet_budget` whose stops photograph every target, from any layer
+    flown (the caller's to ensure). The vehicles' sorties are such a set; if ``K'`` of the
+    vehicles fly, there are at least ``K'`` sorties, and one of those vehicles flies at least
+    ``1 / K'`` of their total. So the makespan is at least the least over ``K' = 1..K`` of
+    the sorties' least total time, at least ``K'`` of them, over ``K'``.
     """
     if not vehicles:
         raise ValueError("makespan_bound needs at least one vehicle")
@@ -138,7 +183,13 @@ def makespan_bound(vehicles: Sequence[Vehicle], single_bound_m: float | None) ->
             for e, end in zip((v.endurance_s for v in vehicles), ends, strict=True)
         )
         share = max(min(ends) + each, factor * each)
-    return MakespanBound(reach_s=reach, share_s=share, pigeonhole_s=pigeonhole)
+    shared = 0.0
+    if sorties is not None:
+        count = len(vehicles)
+        shared = min(sorties.least_s(k) / k for k in range(1, count + 1))
+    return MakespanBound(
+        reach_s=reach, share_s=share, pigeonhole_s=pigeonhole, sorties_s=float(shared)
+    )
 
 
 # Targets tried for the pigeonhole bound beyond the K + 1 it needs; all subsets up to this K.
