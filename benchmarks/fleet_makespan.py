@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/fleet_makespan.py [--targets 100] [--time-limit 20]
         [--raster odm_dsm_utm51n.tif] [--box M] [--seed 3] [--max-vehicles 4]
-        [--separation altitude|time]
+        [--min-vehicles 1] [--separation altitude|time]
 
 Targets are placed on valid ground of a real raster beside the checkout (``../shared/dem``,
 as the tests place them). Each K is planned by :func:`urpt_gcs.pipeline.fleet.plan_fleet`,
@@ -54,6 +54,7 @@ def main() -> None:
     )
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--max-vehicles", type=int, default=4)
+    parser.add_argument("--min-vehicles", type=int, default=1)
     parser.add_argument("--separation", choices=("altitude", "time"), default="altitude")
     args = parser.parse_args()
     dem = REPO.parent / "shared" / "dem" / args.raster
@@ -78,7 +79,7 @@ def main() -> None:
         csv.write_text(
             "name,lat,lon\n" + "".join(f"{n},{la:.9f},{lo:.9f}\n" for n, la, lo in targets)
         )
-        for k in range(1, args.max_vehicles + 1):
+        for k in range(args.min_vehicles, args.max_vehicles + 1):
             fleet = FleetSettings((VehicleSpec(),) * k, separation=args.separation)
             started = time.perf_counter()
             result = plan_fleet(dem, csv, settings, fleet)

@@ -325,7 +325,7 @@ def _shared(
         _vehicle_plan(k, layer, tours, solvers[1], stages) for k, layer in enumerate(problem.layers)
     )
     stages.say("checking separation along the planned tracks")
-    separation = separate(plans, fleet, problem.site.crs)
+    separation = separate(plans, fleet, problem.site.crs, offsets_s)
     stages.lap("separation")
     return tours, plans, separation
 

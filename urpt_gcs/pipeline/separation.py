@@ -246,7 +246,12 @@ def pair_closest(tracks: Sequence[Track], i: int, j: int) -> Closest | None:
     return best
 
 
-def separate(plans: Sequence[Plan], fleet: FleetSettings, crs: pyproj.CRS) -> Separation:
+def separate(
+    plans: Sequence[Plan],
+    fleet: FleetSettings,
+    crs: pyproj.CRS,
+    first: Sequence[float] | None = None,
+) -> Separation:
     """Start delays that keep every pair apart, and the closest approach they leave.
 
     Vehicles are taken in turn (:func:`_delays`, for a few orders of take-off); each starts
@@ -264,6 +269,8 @@ def separate(plans: Sequence[Plan], fleet: FleetSettings, crs: pyproj.CRS) -> Se
         The fleet's settings: separation mode, layer spacing and least distance.
     crs
         The planning CRS the plans share, to give the closest approach in lat/lon.
+    first
+        Start delays the plans were shared out for: their order of take-off is tried first.
 
     Returns
     -------
@@ -285,6 +292,7 @@ def separate(plans: Sequence[Plan], fleet: FleetSettings, crs: pyproj.CRS) -> Se
     # landing is kept, the first refusal raised if every order is refused.
     count = len(plans)
     turns = [
+        *([] if first is None else [sorted(range(count), key=lambda k: (first[k], k))]),
         list(range(count)),
         sorted(range(count), key=lambda k: -plans[k].flight_time_s),
         list(range(count - 1, -1, -1)),
