@@ -71,10 +71,13 @@ def bounds_tour(
     certificate: Certificate,
     settings: PlanSettings,
     flown_m: float,
+    flown_s: float,
 ) -> tuple[tuple[Tour, SortieOrder | None, CheckedFlight], float, float] | None:
     """The tour read off the certified bound's relaxed tour and refined, checked as the
     mission will be, cut into sorties and checked, with its flown and refined lengths: when
-    it is shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown; else None.
+    it is shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown, and its
+    flight no longer than ``flown_s`` (read off a relaxed tour, it may stop more often);
+    else None.
 
     Parameters
     ----------
@@ -88,6 +91,8 @@ def bounds_tour(
         The plan's settings.
     flown_m
         The refined tour's length as flown, every sortie from home and back.
+    flown_s
+        The refined tour's flight time as flown, every sortie's.
 
     Returns
     -------
@@ -107,7 +112,10 @@ def bounds_tour(
         return None
     flown = sorties_and_missions(site, area, found, settings, Stages(None))
     other_m = math.fsum(s.length_m for s in flown[2].sorties)
-    return (flown, other_m, found.length) if other_m < flown_m else None
+    other_s = math.fsum(s.flight_time_s for s in flown[2].sorties)
+    if other_m >= flown_m or other_s > flown_s:
+        return None
+    return flown, other_m, found.length
 
 
 def certify_flight(

@@ -151,7 +151,8 @@ def finish_plan(
         stages.lap("bound")
         if refinement is not None:
             stages.say("reading a tour off the bound")
-            better = bounds_tour(site, area, planned, certificate, settings, flown_m)
+            flown_s = math.fsum(s.flight_time_s for s in flight.sorties)
+            better = bounds_tour(site, area, planned, certificate, settings, flown_m, flown_s)
             stages.lap("bound's tour")
             if better is not None:
                 # Shorter as flown too: it is the plan.
