@@ -195,6 +195,8 @@ def makespan_bound(
 # Targets tried for the pigeonhole bound beyond the K + 1 it needs; all subsets up to this K.
 _PIGEON_SPARE = 3
 _PIGEON_SUBSETS_MAX_K = 6
+# Up to this K the targets farthest to reach are tried beside those chosen apart.
+_PIGEON_BOTH_MAX_K = 4
 
 
 def _pigeonhole_s(vehicles: Sequence[Vehicle], radius_m: FloatArray, reach_s: FloatArray) -> float:
@@ -203,14 +205,30 @@ def _pigeonhole_s(vehicles: Sequence[Vehicle], radius_m: FloatArray, reach_s: Fl
     way out to one region, across to the other, back home and a landing, with two stops
     (two sorties take longer still: the way across is no longer than the two ways home).
     The least such flight over the pairs of the set and the vehicles bounds the makespan;
-    the set is chosen among the targets farthest to reach."""
+    the set is chosen among targets no point sees two of, taken farthest to reach first,
+    and among the farthest to reach as they come."""
     k_count = len(vehicles)
     g = vehicles[0].instance.geometry
     assert g is not None
     m = len(g.targets_xy)
     if m < k_count + 1:
         return 0.0
-    pick = np.argsort(-reach_s, kind="stable")[: k_count + 1 + _PIGEON_SPARE]
+    # The farthest to reach first, each kept if no point sees it and one already kept.
+    chosen: list[int] = []
+    for t in np.argsort(-reach_s, kind="stable").tolist():
+        apart = (
+            np.hypot(*(g.targets_xy[chosen] - g.targets_xy[t]).T) > radius_m[chosen] + radius_m[t]
+        )
+        if apart.all():
+            chosen.append(int(t))
+            if len(chosen) == k_count + 1 + _PIGEON_SPARE:
+                break
+    # And the farthest to reach as they come, whose subsets may be apart too.
+    farthest = np.argsort(-reach_s, kind="stable")[: k_count + 1 + _PIGEON_SPARE].tolist()
+    pool = list(dict.fromkeys(chosen + (farthest if k_count <= _PIGEON_BOTH_MAX_K else [])))
+    if len(pool) < k_count + 1:
+        return 0.0
+    pick = np.asarray(pool, dtype=np.int64)
     xy, r = g.targets_xy[pick], radius_m[pick]
     across = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
     disjoint = across > r[:, None] + r[None, :]
