@@ -457,3 +457,30 @@ def test_no_regions_give_the_single_bound() -> None:
     budget = SortieBudget.of(_model(), ALT_M, 600.0)
     bound = sortie_bound(np.zeros((0, 2)), np.zeros(0), np.zeros(0), 123.5, budget)
     assert bound == SortieBound(123.5, 0.0, 0, 123.5, 0.0)
+
+
+@pytest.mark.parametrize("spacing", [1.5, 4.0, 8.0, 15.0])
+@pytest.mark.parametrize("layout", ["line", "ring"])
+def test_leg_overhead_counts_stay_under_the_best_plan_of_close_stops(
+    spacing: float, layout: str
+) -> None:
+    """Six stops a few metres apart, 150 m out: legs shorter than the cruise length spend
+    less on speeding up and braking, and the bound's counts of legs at each gap must not
+    claim more than the best plan spends (every order, every split, timed by the model)."""
+    model = _model()
+    k = np.arange(6)
+    if layout == "line":
+        pts = np.column_stack([150.0 + spacing * k, np.zeros(6)])
+    else:
+        a = 2.0 * math.pi * k / 6
+        rad = spacing / (2.0 * math.sin(math.pi / 6))
+        pts = np.column_stack([150.0 + rad * np.cos(a), rad * np.sin(a)])
+    for endurance in (math.inf, 1.3 * _sortie_time(model, pts[:3])):
+        best_m, best_s, _ = _optimum(pts, model, endurance)
+        budget = SortieBudget.of(model, ALT_M, endurance)
+        bound = _bound_points(pts, _tsp_m(pts), budget)
+        assert bound.length_m <= best_m + TOL
+        assert bound.flight_time_s <= best_s + TOL
+        # Not vacuous: within the speeding-up of one leg per stop of the best plan.
+        _, extra = model.cruise_overhead()
+        assert bound.flight_time_s >= best_s - 6.0 * extra

@@ -29,17 +29,24 @@ sortie. With what the pieces outside need, for every ``rho``:
 is flown at the return speed, the rest at the cruise speed (each leg no faster than its
 length over its speed): its time is at least ``ends + stops * stop + h * length`` with
 ``h = min(1 / cruise, (1 / cruise + 1 / return) / 2)`` and ``ends`` the take-off and the
-landing. The stops are at least ``S``: weights on the regions' circles such that the circles
+landing. The return leg starts at a stop, in some region, so it is also no longer than
+``far``, the farthest any region's circle reaches from home: ``K`` sorties fly at most
+``min(L / 2, K * far)`` of their length at the return speed, and ``h * L`` is raised to
+``L / cruise - min(L / 2, K * far) * (1 / cruise - 1 / return)`` where that is more.
+The stops are at least ``S``: weights on the regions' circles such that the circles
 through any one point weigh at most 1 together (:func:`~urpt_gcs.bound.geometric.stop_packing`)
 sum to at most the number of stops, and those of the regions beyond a radius to at most the
 stops that photograph them. Legs also speed up and brake: a leg of length ``d`` takes
 ``f(d)`` more than its length over the cruise speed, ``f(d) = c`` exactly from the length
 ``delta`` at which it reaches the cruise speed, and ``F(g)``, the least of ``f`` over lengths
-of at least ``g``, for every leg of at least ``g``. Take regions whose circles lie at least
-``g`` apart, ``Q_g`` of them: the stops that photograph them are at least ``g`` apart, and
-within a sortie the legs and stops from one such stop to the next take at least one leg of
-their total length (a rest-to-rest leg's time is subadditive: two legs flown one after the
-other, stopping between, are one way of flying their sum). So the sorties' legs take at
+of at least ``g``, for every leg of at least ``g``. Take stops at least ``g`` apart,
+``Q_g`` of them at least: within a sortie the legs and stops from one such stop to the next
+take at least one leg of their total length (a rest-to-rest leg's time is subadditive: two
+legs flown one after the other, stopping between, are one way of flying their sum). Such
+stops are those of regions whose circles lie at least ``g`` apart; or, walking each sortie,
+its first stop and then every stop at least ``g`` from the last one taken: every stop is
+then within ``g`` of one taken, so those taken meet every region's circle widened by ``g``,
+and the packing of the widened circles counts them. So the sorties' legs take at
 least ``(Q_g - K) * F(g)`` beyond their length's share, for each of a few gaps ``g`` up to
 ``delta``, and the count above holds with ``Q_g * F(g)`` added to the work and ``F(g)`` to
 what each sortie holds. The total flight time is at least
@@ -61,7 +68,7 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from urpt_gcs.arrays import FloatArray
-from urpt_gcs.bound.geometric import stop_packing
+from urpt_gcs.bound.geometric import PACKING_LP_MAX_CIRCLES, stop_packing
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.problem.regions import OuterStar
 
@@ -109,6 +116,9 @@ class SortieBudget:
     chains
         Pairs ``(g, F)``: every leg at least ``g`` long takes at least ``F`` more than its
         length over the cruise speed (speeding up and braking); none to leave that out.
+    cruise_per_metre_s, return_per_metre_s
+        Least time per metre of a survey leg and of the leg home (0: only ``per_metre_s``
+        is counted).
     """
 
     endurance_s: float
@@ -116,6 +126,8 @@ class SortieBudget:
     stop_s: float
     per_metre_s: float
     chains: tuple[tuple[float, float], ...] = ()
+    cruise_per_metre_s: float = 0.0
+    return_per_metre_s: float = 0.0
 
     @classmethod
     def of(cls, model: FlightModel, altitude_rel_m: float, endurance_s: float) -> SortieBudget:
@@ -140,7 +152,9 @@ class SortieBudget:
         ends = model.takeoff_s(altitude_rel_m) + model.landing_s(altitude_rel_m)
         leg_from, _ = model.cruise_overhead()
         chains = tuple((g * leg_from, least_extra_s(model, g * leg_from)) for g in CHAIN_GAPS)
-        return cls(endurance_s, ends, model.stop_s, per_metre, chains)
+        return cls(
+            endurance_s, ends, model.stop_s, per_metre, chains, cruise, 1.0 / model.return_m_s
+        )
 
     @property
     def length_m(self) -> float:
@@ -173,7 +187,10 @@ class SortieBound:
     ends_s, stop_s
         What each sortie spends on its take-off and landing, and each stop.
     length_s
-        The least time of ``length_m`` at the speeds.
+        The least time of ``length_m`` at the speeds, however it is flown.
+    cruise_length_s, return_saving_s, far_m
+        ``length_m`` at the cruise speed, what each metre flown home saves on it, and how
+        far from home any sortie's leg home starts at most.
     """
 
     length_m: float
@@ -186,6 +203,15 @@ class SortieBound:
     ends_s: float = 0.0
     stop_s: float = 0.0
     length_s: float = 0.0
+    cruise_length_s: float = 0.0
+    return_saving_s: float = 0.0
+    far_m: float = math.inf
+
+    def length_time_s(self, count: int) -> float:
+        """The least time of the length over ``count`` sorties, each flying at most its leg
+        home (at most ``far_m``, and at most half of it) at the return speed."""
+        home = min(0.5 * self.length_m, count * self.far_m)
+        return max(self.length_s, self.cruise_length_s - self.return_saving_s * home)
 
     def total_s(self, count: int) -> float:
         """The least total flight time of ``count`` sorties (of at least
@@ -194,15 +220,24 @@ class SortieBound:
             count * self.ends_s
             + max(count, self.stops) * self.stop_s
             + max((max(q - count, 0) * extra for q, extra in self.spread), default=0.0)
-            + self.length_s
+            + self.length_time_s(count)
         )
 
     def least_s(self, at_least: int) -> float:
         """The least total flight time of any number of sorties from ``at_least`` (and from
-        :attr:`sorties`) up: piecewise linear in the count and rising past its last corner,
-        it is least at one of them."""
+        :attr:`sorties`) up: every term is convex and piecewise linear in the count, and the
+        sum rises past its last corner, so it is least at the first count or next to a
+        corner (the length's time bends where the legs home reach half the length, and
+        where it meets its least)."""
         first = max(at_least, self.sorties)
-        corners = {first, self.stops, *(q for q, _ in self.spread)}
+        bends: list[float] = [float(self.stops), *(float(q) for q, _ in self.spread)]
+        slope = self.return_saving_s * self.far_m
+        if 0.0 < slope < math.inf:
+            bends += [
+                0.5 * self.length_m / self.far_m,
+                (self.cruise_length_s - self.length_s) / slope,
+            ]
+        corners = {first, *(f(b) for b in bends for f in (math.floor, math.ceil))}
         return min(self.total_s(k) for k in corners if k >= first)
 
 
@@ -329,7 +364,13 @@ def sortie_bound(
     by_r = np.argsort(r, kind="stable")
     weight_r, beyond_w = r[by_r], np.cumsum(weights[by_r][::-1])[::-1]
     chains = [
-        (np.sort(r[farthest[_apart(xy[farthest], reach[farthest], gap)]]), extra)
+        (
+            np.sort(r[farthest[_apart(xy[farthest], reach[farthest], gap)]]),
+            np.cumsum(stop_packing(xy, reach + gap)[by_r][::-1])[::-1]
+            if n <= PACKING_LP_MAX_CIRCLES
+            else np.zeros(n),
+            extra,
+        )
         for gap, extra in budget.chains
         if extra > 0.0
     ]
@@ -340,8 +381,14 @@ def sortie_bound(
         packed = float(beyond_w[first]) if first < beyond_w.size else 0.0
         apart = apart_r.size - int(np.searchsorted(apart_r, rho, side="left"))
         spread = [
-            (far_r.size - int(np.searchsorted(far_r, rho, side="left")), extra)
-            for far_r, extra in chains
+            (
+                max(
+                    far_r.size - int(np.searchsorted(far_r, rho, side="left")),
+                    math.ceil(float(widened[first]) - _EPS) if first < widened.size else 0,
+                ),
+                extra,
+            )
+            for far_r, widened, extra in chains
         ]
         return max(float(apart), packed), spread
 
@@ -377,6 +424,9 @@ def sortie_bound(
         ends_s=budget.ends_s,
         stop_s=budget.stop_s,
         length_s=budget.per_metre_s * float(best),
+        cruise_length_s=budget.cruise_per_metre_s * float(best),
+        return_saving_s=max(budget.cruise_per_metre_s - budget.return_per_metre_s, 0.0),
+        far_m=float(np.max(r + 2.0 * reach)),
     )
     return dataclasses.replace(out, flight_time_s=float(out.least_s(out.sorties)))
 

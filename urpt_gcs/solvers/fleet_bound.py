@@ -92,6 +92,8 @@ def fleet_budget(vehicles: Sequence[Vehicle]) -> SortieBudget:
         ends_s=min(b.ends_s for b in budgets),
         stop_s=min(b.stop_s for b in budgets),
         per_metre_s=min(b.per_metre_s for b in budgets),
+        cruise_per_metre_s=min(b.cruise_per_metre_s for b in budgets),
+        return_per_metre_s=min(b.return_per_metre_s for b in budgets),
         chains=tuple(
             (g, min(least_extra_s(v.model, g) for v in vehicles)) for g in gaps if math.isfinite(g)
         ),
