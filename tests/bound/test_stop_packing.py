@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from support.sortie_brute import VARIED_MODELS
 
 from urpt_gcs.bound.geometric import stop_packing
 from urpt_gcs.bound.sorties import least_extra_s
@@ -88,14 +89,7 @@ def test_packing_is_not_vacuous() -> None:
     assert stop_packing(chain, np.full(7, 10.0)).sum() == pytest.approx(4.0, abs=1e-6)
 
 
-@pytest.mark.parametrize(
-    "model",
-    [
-        FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0),
-        FlightModel.arducopter(cruise_m_s=12.0, hold_s=0.0, accel_m_s2=1.0),
-        FlightModel.px4(cruise_m_s=8.0, hold_s=2.0),
-    ],
-)
+@pytest.mark.parametrize("model", VARIED_MODELS)
 def test_least_extra_is_under_every_longer_leg_and_close(model: FlightModel) -> None:
     leg_from, extra = model.cruise_overhead()
     d = np.linspace(0.0, 2.0 * leg_from, 20_001)

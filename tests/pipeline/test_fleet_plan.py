@@ -15,6 +15,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import DEMO, REAL_DEMS, needs_shared
 from support.independent import check_mission, load_raster, read_waypoints_file
+from support.sortie_brute import VARIED_MODELS
 from support.targets import valid_targets
 
 from urpt_gcs.bound.sorties import sortie_bound
@@ -187,14 +188,7 @@ def test_sortie_share_of_the_bound_stays_under_the_brute_force_optimum(
     assert bound.bound_s >= without.bound_s
 
 
-@pytest.mark.parametrize(
-    "model",
-    [
-        FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0),
-        FlightModel.arducopter(cruise_m_s=12.0, hold_s=0.0, accel_m_s2=1.0),
-        FlightModel.px4(cruise_m_s=8.0, hold_s=2.0),
-    ],
-)
+@pytest.mark.parametrize("model", VARIED_MODELS)
 def test_leg_times_grow_and_are_subadditive(model: FlightModel) -> None:
     """The reach bound needs it: a chain of legs is never quicker than one leg of their sum."""
     d = np.concatenate([np.linspace(0.0, 6.0, 301), np.linspace(6.0, 400.0, 400)])

@@ -12,7 +12,7 @@ import numpy as np
 
 from urpt_gcs.problem.flight_time import FlightModel
 
-__all__ = ["best_partition", "parts", "sortie_time", "subsets"]
+__all__ = ["VARIED_MODELS", "best_partition", "parts", "sortie_time", "subsets"]
 
 
 def sortie_time(
@@ -84,3 +84,11 @@ def best_partition(cost: np.ndarray, n: int) -> float:
     for mask in range(1, 1 << n):
         best[mask] = min(cost[p] + best[mask ^ p] for p in parts(mask))
     return float(best[-1])
+
+
+# Flight models of different speeds, limits and firmwares, for tests of their properties.
+VARIED_MODELS = [
+    FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0),
+    FlightModel.arducopter(cruise_m_s=12.0, hold_s=0.0, accel_m_s2=1.0),
+    FlightModel.px4(cruise_m_s=8.0, hold_s=2.0),
+]
