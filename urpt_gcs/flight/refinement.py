@@ -44,16 +44,19 @@ from urpt_gcs.visibility.segments import segment_profile
 _TOWARDS = (1.0, 0.5, 0.25, 0.125, 0.0625)
 # Directions of the pattern around a stop.
 _DIRECTIONS = 12
-# The pattern's first step, as a share of the stop's smallest cone radius, and its last.
+# The pattern's first step, as a share of the stop's smallest cone radius, and its last:
+# a stop is placed to within this of the best nearby, far finer than any vehicle holds a
+# waypoint; every halving below it costs the sweeps of a whole tour.
 _FIRST_STEP = 0.25
-_LAST_STEP_M = 0.01
+_LAST_STEP_M = 0.05
 # Sweeps at most (a sweep that moves nothing halves every step, so this is never reached
 # on a tour of sane size).
 _MAX_SWEEPS = 400
 # Rounds of moving the stops and 2-opt on their order.
 _ROUNDS = 4
-# A move must gain at least this much (metres) to count.
-_MIN_GAIN_M = 1e-6
+# A move must shorten the tour by at least this much (metres) to count: smaller gains only
+# keep the sweeps going.
+_MIN_GAIN_M = 0.01
 
 Written = Callable[[FloatArray], FloatArray]
 Fill = Callable[[FloatArray, FloatArray], object]

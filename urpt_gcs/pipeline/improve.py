@@ -36,7 +36,7 @@ _WALK_SHARE = 0.5
 # How much shorter a tour read off the bound must be to replace the refined one.
 _BETTER = 1e-6
 
-# Seconds refinement may take at most: it ends when its steps are down to a centimetre (so
+# Seconds refinement may take at most: it ends when its steps are down to a few centimetres (so
 # that a plan does not depend on the machine's load), this only guards against a runaway.
 _REFINE_MAX_S = 60.0
 
