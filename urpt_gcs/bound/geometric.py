@@ -127,14 +127,11 @@ def stop_packing(centres_xy: FloatArray, reach_m: FloatArray) -> FloatArray:
     foot = xy[i] + a[:, None] * u
     normal = np.column_stack([-u[:, 1], u[:, 0]]) * h[:, None]
     points = np.vstack([foot + normal, foot - normal, xy + np.column_stack([r, np.zeros(n)])])
-    rows, cols = [], []
-    for k, near in enumerate(tree.query_ball_point(points, widest * (1.0 + _IN_REL) + _IN_ABS)):
-        near_a = np.asarray(near, dtype=np.int64)
-        dist = np.hypot(*(xy[near_a] - points[k]).T)
-        held = near_a[dist <= r[near_a] * (1.0 + _IN_REL) + _IN_ABS]
-        rows.append(np.full(held.size, k, dtype=np.int64))
-        cols.append(held)
-    row, col = np.concatenate(rows), np.concatenate(cols)
+    near = cKDTree(points).sparse_distance_matrix(
+        tree, widest * (1.0 + _IN_REL) + _IN_ABS, output_type="ndarray"
+    )
+    held = near["v"] <= r[near["j"]] * (1.0 + _IN_REL) + _IN_ABS
+    row, col = near["i"][held].astype(np.int64), near["j"][held].astype(np.int64)
     checks = csr_matrix((np.ones(row.size), (row, col)), shape=(len(points), n))
     depth = np.asarray(checks.sum(axis=1)).ravel()
     deepest = np.zeros(n)
