@@ -21,7 +21,9 @@ from click.testing import CliRunner
 from conftest import DEMO, WriteDem
 from support.independent import check_mission, load_raster, read_waypoints_file, sees
 
+import urpt_gcs.pipeline.improve as improve
 from urpt_gcs.cli import main
+from urpt_gcs.errors import PlanError
 from urpt_gcs.files.products import write_products
 from urpt_gcs.files.report import summary_text
 from urpt_gcs.pipeline.planner import plan
@@ -204,3 +206,24 @@ def test_state_plane_feet_dem_plans_with_true_lengths(tmp_path: Path, write_dem:
     assert data["tour_length_m"] == pytest.approx(_geodesic_tour_m(out), rel=2e-3)
     problems = check_mission(dem, sorted(out.glob("mission*.waypoints")), _targets(csv), 30.0, 10.0)
     assert problems == []
+
+
+def test_a_tour_read_off_the_bound_that_fails_a_check_is_not_flown(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The tour read off the bound is checked as written like any other; when a check
+    refuses it (a stop on the edge of what it sees once rounded), the refined tour is flown,
+    not the plan refused."""
+    read: list[int] = []
+
+    def refuse(*args: Any, **kwargs: Any) -> Any:
+        read.append(1)
+        raise PlanError("stop 5 no longer sees its target once written")
+
+    monkeypatch.setattr(improve, "sorties_and_missions", refuse)
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=2.0))
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    assert read, "no tour was read off the bound: the test no longer reaches the check"
+    assert result.certificate is not None
+    assert result.refinement is not None
+    assert result.tour.length == pytest.approx(result.refinement.after_m)

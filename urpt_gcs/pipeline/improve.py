@@ -14,6 +14,7 @@ import numpy as np
 from urpt_gcs.bound.certificate import Certificate, certify
 from urpt_gcs.bound.geometric import geometric_lower_bound
 from urpt_gcs.bound.sorties import SortieBudget, sortie_bound, star_distances
+from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.refinement import Refinement, refine_along, refine_tour
 from urpt_gcs.flight.sorties import SortieOrder
 from urpt_gcs.pipeline.area import PlanArea, SiteInputs, altitude_rel
@@ -77,7 +78,7 @@ def bounds_tour(
     mission will be, cut into sorties and checked, with its flown and refined lengths: when
     it is shorter than ``tour`` (the refined tour) and than ``flown_m`` as flown, and its
     flight no longer than ``flown_s`` (read off a relaxed tour, it may stop more often);
-    else None.
+    else None, and None when a check as written refuses it.
 
     Parameters
     ----------
@@ -110,7 +111,12 @@ def bounds_tour(
     found = read[0]
     if found.length >= tour.length * (1.0 - _BETTER):
         return None
-    flown = sorties_and_missions(site, area, found, settings, Stages(None))
+    try:
+        flown = sorties_and_missions(site, area, found, settings, Stages(None))
+    except PlanError:
+        # A stop read off the relaxed tour that fails a check as written (on the edge of
+        # what it sees, once rounded to the mission's grid): the refined tour stays.
+        return None
     other_m = math.fsum(s.length_m for s in flown[2].sorties)
     other_s = math.fsum(s.flight_time_s for s in flown[2].sorties)
     if other_m >= flown_m or other_s > flown_s:
