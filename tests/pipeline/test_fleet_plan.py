@@ -4,11 +4,13 @@ independently on every vehicle's written mission."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,9 +20,12 @@ from support.independent import check_mission, load_raster, read_waypoints_file
 from support.sortie_brute import VARIED_MODELS
 from support.targets import valid_targets
 
+import urpt_gcs.pipeline.fleet as fleet_module
 from urpt_gcs.bound.sorties import sortie_bound
 from urpt_gcs.cli import main
+from urpt_gcs.errors import SettingsError
 from urpt_gcs.pipeline.separation import Track, closest, pair_closest, timing_slack_s
+from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, VehicleSpec
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.problem.instance import Geometry, Instance
 from urpt_gcs.site.targets import read_targets
@@ -447,3 +452,32 @@ def test_track_follows_the_plan_through_every_stop_in_the_planned_time() -> None
         at = np.flatnonzero(np.hypot(tr.xyz[:, 0] - x, tr.xyz[:, 1] - y) < 1e-9)
         assert at.size >= 2 and np.allclose(tr.xyz[at, 2], eye)
     assert not tr.airborne[0] and not tr.airborne[-1]
+
+
+def test_a_second_sharing_that_is_refused_leaves_the_first(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """When separation delays a vehicle, the targets are shared out again with the delays
+    counted; if that second sharing is refused (a vehicle idle, no delays that keep them
+    apart), the first stands and the plan is not refused."""
+    real = fleet_module._shared
+    calls: list[object] = []
+
+    def shared(*args: Any, **kwargs: Any) -> Any:
+        calls.append(args[5])
+        if len(calls) > 1:
+            raise SettingsError("vehicle 2 has nothing left to photograph")
+        tours, plans, separation = real(*args, **kwargs)
+        # As if separation had held vehicle 2 back.
+        delays = (0.0, *(30.0 for _ in plans[1:]))
+        return tours, plans, dataclasses.replace(separation, start_delays_s=delays)
+
+    monkeypatch.setattr(fleet_module, "_shared", shared)
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=2.0))
+    fleet = FleetSettings((VehicleSpec(), VehicleSpec()))
+    result = fleet_module.plan_fleet(DEMO / "site.tif", DEMO / "targets.kml", settings, fleet)
+    assert calls == [None, (0.0, 30.0)]
+    assert result.separation.start_delays_s == (0.0, 30.0)
+    first, second = (p.flight_time_s for p in result.plans)
+    assert result.makespan_s == pytest.approx(max(first, 30.0 + second))
+    assert result.makespan_s >= result.bound.bound_s

@@ -273,8 +273,15 @@ def plan_fleet(
         # The start delays come from the tracks: shared out again with them counted, a
         # vehicle held back gets less to fly. Kept if the last landing is earlier.
         stages.say("sharing the targets again with the start delays counted")
-        again = _shared(problem, fleet, single.order, solvers, search, delays, stages)
-        if _last_landing(again[1], again[2]) < _last_landing(plans, separation):
+        try:
+            again = _shared(problem, fleet, single.order, solvers, search, delays, stages)
+        except SettingsError:
+            # Shared out again, a vehicle was left idle or no delays kept the vehicles apart:
+            # the first sharing stands.
+            again = None
+        if again is not None and _last_landing(again[1], again[2]) < _last_landing(
+            plans, separation
+        ):
             tours, plans, separation = again
     bound = _makespan_bound(problem, single.length, settings, stages)
     result = FleetPlan(
