@@ -125,19 +125,22 @@ class FleetTours:
     search_s: float
     offsets_s: tuple[float, ...] = ()
 
-    def _finish(self, times_s: tuple[float, ...]) -> float:
-        offsets = self.offsets_s or (0.0,) * len(times_s)
-        return max(o + t for o, t in zip(offsets, times_s, strict=True))
-
     @property
     def makespan_s(self) -> float:
         """When the last vehicle lands, its start delay included."""
-        return self._finish(self.times_s)
+        return _last_landing_s(self.offsets_s or None, self.times_s)
 
     @property
     def naive_makespan_s(self) -> float:
         """The same for the naive split, with the same start delays."""
-        return self._finish(self.naive_times_s)
+        return _last_landing_s(self.offsets_s or None, self.naive_times_s)
+
+
+def _last_landing_s(offsets_s: Sequence[float] | None, times_s: Sequence[float]) -> float:
+    """When the last of flights of these times lands, each started after its offset (none:
+    all at once)."""
+    offsets = offsets_s if offsets_s is not None else [0.0] * len(times_s)
+    return max(o + t for o, t in zip(offsets, times_s, strict=True))
 
 
 def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntArray]:
@@ -362,7 +365,7 @@ def solve_fleet(
         raise ValueError("solve_fleet needs one offset per vehicle")
 
     def finish(times: Sequence[float]) -> float:
-        return max(o + t for o, t in zip(offsets, times, strict=True))
+        return _last_landing_s(offsets, times)
 
     pieces, naive_times, cut = naive_split(vehicles, single_order, reference, offsets)
     # The tour is a cycle: it is cut open at a few other stops too; the search descends from
