@@ -32,6 +32,7 @@ where the tour is decided; that stops at the gap target, the time limit or a pie
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -61,6 +62,7 @@ __all__ = [
     "start_pieces",
     "subset_bound",
     "touches_boundary",
+    "warm_up",
 ]
 
 I64 = npt.NDArray[np.int64]
@@ -682,3 +684,19 @@ def _order(
         found.value, "order", 0, 0, time.perf_counter() - started,
         found.nodes, found.open_nodes, found.finished, found.leaf_length, found.leaf_xy,
     )  # fmt: skip
+
+
+@functools.cache
+def warm_up() -> None:
+    """Compile the bound's kernels, or load them from numba's cache, on tiny instances, so
+    that a bound's time limit is spent bounding: the order search over a few triangles (stars
+    that are not discs take kernels of their own), and the 1-tree over one more disc than
+    :data:`ORDER_MAX_REGIONS` (the size from which it runs)."""
+    rng = np.random.default_rng(0)
+    corners = rng.random((4, 1, 2)) * 200.0 + np.array([[0.0, 0.0], [9.0, 1.0], [2.0, 8.0]])
+    triangles = tuple(Polygon(c) for c in corners)
+    # Searched to the end, whatever the compiling costs, so that every kernel it runs is met.
+    lower_bound(RegionSet(polygons=triangles, depot_xy=(0.0, 0.0)), 2000.0, 60.0)
+    n = ORDER_MAX_REGIONS + 1
+    discs = np.column_stack([rng.random((n, 2)) * 100.0 * math.sqrt(n), np.full(n, 2.0)])
+    lower_bound(RegionSet(discs=discs, depot_xy=(0.0, 0.0)), 2.0 * float(discs.sum()), 0.0)

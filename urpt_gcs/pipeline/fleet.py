@@ -36,7 +36,7 @@ from urpt_gcs.pipeline.area import (
     read_area,
     read_site,
 )
-from urpt_gcs.pipeline.improve import certify_flight
+from urpt_gcs.pipeline.improve import certify_flight, prepare_bound
 from urpt_gcs.pipeline.missions import flight_model
 from urpt_gcs.pipeline.planner import finish_plan
 from urpt_gcs.pipeline.result import Plan
@@ -350,11 +350,13 @@ def _makespan_bound(
     vehicles = problem.vehicles
     if not (settings.certify and problem.monotone):
         return makespan_bound(vehicles, problem.single_bound_m)
-    bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
-    stages.say(f"bounding the fleet's flights (up to {bound_s:.1f} s)")
     top = max(problem.layers, key=lambda layer: layer.area.camera.altitude_m)
     home = vehicles[0].home_xy
     site = dataclasses.replace(top.site, home_xy=home)
+    prepare_bound(site, top.area)
+    stages.lap("compile")
+    bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
+    stages.say(f"bounding the fleet's flights (up to {bound_s:.1f} s)")
     one_home = all(v.home_xy == home for v in vehicles)
     certificate = certify_flight(
         site, top.area, problem.widest, single_m, single_m, bound_s, top.settings,

@@ -13,6 +13,7 @@ import numpy as np
 
 from urpt_gcs.bound.certificate import Certificate, certify
 from urpt_gcs.bound.geometric import geometric_lower_bound
+from urpt_gcs.bound.lower_bound import warm_up as warm_bound
 from urpt_gcs.bound.sorties import SortieBudget, sortie_bound, star_distances
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.refinement import Refinement, refine_along, refine_tour
@@ -29,6 +30,7 @@ from urpt_gcs.pipeline.stages import Stages
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.outer import finer_stars, outer_regions
+from urpt_gcs.visibility.outer import warm_up as warm_walks
 
 # Share of the bound's time the outer stars past the first ones (those far apart, walked
 # whatever the clock) may take to walk, beside the bound's own time.
@@ -124,6 +126,14 @@ def bounds_tour(
     return flown, other_m, found.length
 
 
+def prepare_bound(site: SiteInputs, area: PlanArea) -> None:
+    """Compile the bound's kernels and its star walks' (or load them from numba's cache)
+    before the bound's clock starts: compiled within it, a cold cache would leave a bound
+    much further from the flight than the same plan certifies once compiled."""
+    warm_walks(area.terrain, site.targets_xy[0], float(area.ground_m[0]), area.camera)
+    warm_bound()
+
+
 def certify_flight(
     site: SiteInputs,
     area: PlanArea,
@@ -192,4 +202,4 @@ def certify_flight(
     return dataclasses.replace(single, lower_bound_m=value, method=method, sorties=sorties)
 
 
-__all__ = ["bounds_tour", "certify_flight", "refine_stops"]
+__all__ = ["bounds_tour", "certify_flight", "prepare_bound", "refine_stops"]

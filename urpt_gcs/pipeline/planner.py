@@ -29,7 +29,7 @@ from urpt_gcs.pipeline.area import (
     site_fields,
 )
 from urpt_gcs.pipeline.band import plan_in_band
-from urpt_gcs.pipeline.improve import bounds_tour, certify_flight, refine_stops
+from urpt_gcs.pipeline.improve import bounds_tour, certify_flight, prepare_bound, refine_stops
 from urpt_gcs.pipeline.missions import sorties_and_missions
 from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.pipeline.settings import PlanSettings
@@ -142,6 +142,9 @@ def finish_plan(
     )
     certificate = None
     if settings.certify:
+        stages.say("preparing the bound (compiled on first use)")
+        prepare_bound(site, area)
+        stages.lap("compile")
         bound_s = settings.bound_time_s or bound_time_s(settings.solve.time_limit_s)
         stages.say(f"bounding the shortest possible flight (up to {bound_s:.1f} s)")
         flown_m = math.fsum(s.length_m for s in flight.sorties)

@@ -33,6 +33,7 @@ __all__ = [
     "star_holds",
     "star_polygon",
     "star_sectors",
+    "warm_up",
 ]
 
 # Stars walked on the DEM whatever the clock (the farthest apart first, the ones the order
@@ -297,3 +298,12 @@ def points_along(poly: FloatArray, spacing_m: float) -> FloatArray:
         f = np.arange(count)[:, None] / count
         pieces.append(a + f * (b - a))
     return np.vstack(pieces)
+
+
+def warm_up(terrain: Terrain, target_xy: FloatArray, ground_m: float, camera: Camera) -> None:
+    """Compile the star walks' kernels (or load them from numba's cache) by walking one
+    target's star, coarse and finer, so that the time given to the walks is spent walking."""
+    xy = np.asarray(target_xy, dtype=np.float64).reshape(1, 2)
+    ground = np.array([ground_m], dtype=np.float64)
+    star_reach(terrain, xy, ground, camera, 8)
+    finer_wedges(terrain, xy, ground, camera, 8, [0], split=2)
