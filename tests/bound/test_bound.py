@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import itertools
 import math
 
 import numpy as np
@@ -11,47 +10,11 @@ import pytest
 import shapely
 from conftest import CETSP, needs_shared
 from shapely.geometry import Polygon
+from support.brute_tours import brute_force_tour, disc_grid
 
 from urpt_gcs.bench.cetsp import read_instance
 from urpt_gcs.bound.lower_bound import lower_bound, skipped_regions, start_pieces
 from urpt_gcs.problem.regions import RegionSet
-
-
-def _disc_grid(x: float, y: float, r: float, k: int) -> np.ndarray:
-    """Points of a fine grid inside a disc, and on its rim."""
-    g = np.linspace(-r, r, k)
-    gx, gy = np.meshgrid(g, g)
-    inside = gx**2 + gy**2 <= r * r
-    a = np.linspace(0.0, 2.0 * np.pi, 4 * k, endpoint=False)
-    rim = np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])
-    return np.vstack([np.column_stack([x + gx[inside], y + gy[inside]]), rim])
-
-
-def _brute_force(sets: list[np.ndarray], depot: tuple[float, float] | None) -> float:
-    """The shortest closed tour through one point of each set, over every order (a real
-    tour, so it is at least the continuous optimum)."""
-    best = np.inf
-    n = len(sets)
-    first = [np.asarray(depot)[None, :]] if depot is not None else []
-    orders = (
-        itertools.permutations(range(n))
-        if depot
-        else ((0, *p) for p in itertools.permutations(range(1, n)))
-    )
-    for perm in orders:
-        seq = first + [sets[i] for i in perm]
-        for start in range(len(seq[0])):
-            cur = np.zeros(1)
-            prev = seq[0][start : start + 1]
-            for nxt in seq[1:]:
-                d = np.hypot(prev[:, None, 0] - nxt[None, :, 0], prev[:, None, 1] - nxt[None, :, 1])
-                cur = (cur[:, None] + d).min(axis=0)
-                prev = nxt
-            close = np.hypot(*(prev - seq[0][start]).T)
-            best = min(best, float((cur + close).min()))
-            if depot is not None:
-                break
-    return best
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -63,7 +26,7 @@ def test_bound_never_above_a_brute_force_tour(seed: int, method: str) -> None:
     depot = (10.0, 10.0) if seed % 2 == 0 else None
     regions = RegionSet(discs=discs, depot_xy=depot)
     # Without a depot every point of the first disc is a start: a coarser grid.
-    brute = _brute_force([_disc_grid(*d, 25 if depot else 9) for d in discs], depot)
+    brute = brute_force_tour([disc_grid(*d, 25 if depot else 9) for d in discs], depot)
     bound = lower_bound(regions, upper=brute * 2.0, time_limit_s=0.5, method=method)
     assert bound.value <= brute * (1.0 + 1e-9)
     # Not a trivial bound either: the relaxation is close to the optimum on so few discs.
@@ -85,7 +48,7 @@ def test_polygon_bound_never_above_a_brute_force_tour() -> None:
         pts = np.column_stack([gx.ravel(), gy.ravel()])
         own = np.zeros(len(pts), dtype=np.int64) + polys.index(p)
         sets.append(pts[regions.contains(pts, own)])
-    brute = _brute_force(sets, regions.depot_xy)
+    brute = brute_force_tour(sets, regions.depot_xy)
     bound = lower_bound(regions, upper=brute * 2.0, time_limit_s=5.0)  # it finishes well within
     assert 0.8 * brute <= bound.value <= brute * (1.0 + 1e-9)
 
@@ -138,7 +101,7 @@ def test_order_bound_is_below_and_close_to_a_brute_force_tour(seed: int) -> None
     discs = np.column_stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), rng.uniform(0.5, 3, n)])
     depot = (10.0, 10.0) if seed % 2 == 0 else None
     regions = RegionSet(discs=discs, depot_xy=depot)
-    brute = _brute_force([_disc_grid(*d, 15 if depot else 9) for d in discs], depot)
+    brute = brute_force_tour([disc_grid(*d, 15 if depot else 9) for d in discs], depot)
     bound = lower_bound(regions, upper=brute * 1.5, time_limit_s=5.0, method="order")
     assert bound.order_finished
     assert bound.value <= brute * (1.0 + 1e-9)
@@ -195,7 +158,9 @@ def test_order_bound_on_non_convex_regions(seed: int, exact_shapes: bool) -> Non
         grid = np.column_stack([gx.ravel(), gy.ravel()])
         pts = np.vstack([ring, grid])
         sets.append(pts[regions.contains(pts, np.full(len(pts), k))])
-    brute = _brute_force(sets, depot) if depot else _brute_force([s[::3] for s in sets], None)
+    brute = (
+        brute_force_tour(sets, depot) if depot else brute_force_tour([s[::3] for s in sets], None)
+    )
     bound = lower_bound(
         regions, upper=brute * 1.5, time_limit_s=1.0, method="order", exact_shapes=exact_shapes
     )

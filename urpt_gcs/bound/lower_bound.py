@@ -2,7 +2,9 @@
 
 The bound :func:`lower_bound` reports by default is the branch and bound over visiting orders
 of :mod:`urpt_gcs.bound.order_bound` (fixed-order relaxations over convex supersets of the
-regions, each node certified by weak duality). This module also keeps an older, weaker bound
+regions, each node certified by weak duality), over a subset far apart where the regions are
+many, or the tube bound of :mod:`urpt_gcs.bound.tube` over them all where it is larger (where
+regions crowd). This module also keeps an older, weaker bound
 (``method="pieces"``, ``"exact"`` or ``"lagrangian"``), described below.
 
 Each region's outer star (a set that contains it) is cut into *pieces*, annular sectors
@@ -32,7 +34,6 @@ where the tour is decided; that stops at the gap target, the time limit or a pie
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -45,6 +46,7 @@ from shapely.geometry import Polygon
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.one_tree import one_tree_bound
 from urpt_gcs.bound.order_bound import order_bound
+from urpt_gcs.bound.tube import tube_bound
 from urpt_gcs.problem.regions import OuterStar, RegionSet
 
 __all__ = [
@@ -528,7 +530,9 @@ def lower_bound(
         ``order``: branch and bound over visiting orders (:func:`order_bound`); ``auto``:
         that, and beyond :data:`ORDER_MAX_REGIONS` regions the larger of the order search
         over that many far apart and the 1-tree bound over all of them
-        (:func:`~urpt_gcs.bound.one_tree.one_tree_bound`, alone: ``one-tree``); ``exact`` or
+        (:func:`~urpt_gcs.bound.one_tree.one_tree_bound`, alone: ``one-tree``); and with
+        either, the tube bound over every region (:func:`~urpt_gcs.bound.tube.tube_bound`),
+        the largest of them kept; ``exact`` or
         ``lagrangian`` for the relaxed piece problem (small instances); ``pieces``: exact
         for a few regions, else the Lagrangian and the exact optimum over a subset far apart.
     exact_shapes
@@ -536,11 +540,24 @@ def lower_bound(
         bounds the polygons (tighter than their outer stars). Leave it False when the outer
         stars are the only sets known to hold the regions (regions on terrain).
     """
+    if method in ("auto", "order", "one-tree"):
+        warm_up()  # compiled outside the clock
     started = time.perf_counter()
     kept = int(np.count_nonzero(~skipped_regions(regions)))
-    if method == "order" or (method == "auto" and kept <= ORDER_MAX_REGIONS):
+    if method == "auto":
+        cx, cy, cr = _star_discs(regions)
+        tube, _ = tube_bound(np.column_stack([cx, cy]), cr, regions.depot_xy)
+        left = max(time_limit_s - (time.perf_counter() - started), 0.0)
+        if kept <= ORDER_MAX_REGIONS:
+            found = _order(regions, upper, left, gap_target, exact_shapes)
+        else:
+            found = _all_regions(regions, upper, left, gap_target, exact_shapes, method)
+        if tube > found.value:
+            found = replace(found, value=min(tube, upper), method=f"tube over all {regions.n}")
+        return replace(found, seconds=time.perf_counter() - started)
+    if method == "order":
         return _order(regions, upper, time_limit_s, gap_target, exact_shapes)
-    if method in ("auto", "one-tree"):
+    if method == "one-tree":
         return _all_regions(regions, upper, time_limit_s, gap_target, exact_shapes, method)
     pieces, boundary = start_pieces(regions)
     skip = skipped_regions(regions)
@@ -686,12 +703,18 @@ def _order(
     )  # fmt: skip
 
 
-@functools.cache
+# Set once the warm-up has begun: its own bounds must not start it again.
+_WARMING: list[bool] = []
+
+
 def warm_up() -> None:
     """Compile the bound's kernels, or load them from numba's cache, on tiny instances, so
     that a bound's time limit is spent bounding: the order search over a few triangles (stars
     that are not discs take kernels of their own), and the 1-tree over one more disc than
     :data:`ORDER_MAX_REGIONS` (the size from which it runs)."""
+    if _WARMING:
+        return
+    _WARMING.append(True)
     rng = np.random.default_rng(0)
     corners = rng.random((4, 1, 2)) * 200.0 + np.array([[0.0, 0.0], [9.0, 1.0], [2.0, 8.0]])
     triangles = tuple(Polygon(c) for c in corners)
