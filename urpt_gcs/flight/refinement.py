@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from urpt_gcs.arrays import BoolArray, FloatArray
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.flight.margin import RING_POINTS
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
@@ -137,11 +137,15 @@ def _feasible(
     """Which candidate stops (each with its row of targets to see, its heading and its
     neighbours ``a``, ``b``) pass every check of a move. With a depot the leg straight home
     is checked too: a flight cut into sorties may fly it."""
-    # The short legs to the neighbours first, then what the stop sees, and the long leg
-    # home last, only for the stops that passed the rest: the check is the same, the
-    # segments walked fewer.
-    ok = _legs_clear(site, [a, cand], [cand, b])
-    ok &= _sees_all(site, cand, sees & ok[:, None], heading)
+
+    # The cheap checks first and the costly ones only for the stops still standing: which
+    # targets are in the camera's view (arithmetic), then the short legs to the neighbours,
+    # then the lines of sight (the stop's own first, its ring after), and the long leg home
+    # last. The checks are the same; most candidates fail the first ones.
+    def legs(idx: IntArray) -> BoolArray:
+        return _legs_clear(site, [a[idx], cand[idx]], [cand[idx], b[idx]])
+
+    ok = _sees_all(site, cand, sees, heading, legs)
     if depot is not None and ok.any():
         ok[ok] = _legs_clear(site, [cand[ok]], [np.tile(depot, (int(ok.sum()), 1))])
     return ok
@@ -173,10 +177,16 @@ def _legs_clear(site: Site, starts: list[FloatArray], ends: list[FloatArray]) ->
 
 
 def _sees_all(
-    site: Site, cand: FloatArray, sees: BoolArray, heading: FloatArray | None
+    site: Site,
+    cand: FloatArray,
+    sees: BoolArray,
+    heading: FloatArray | None,
+    also: Callable[[IntArray], BoolArray] | None = None,
 ) -> BoolArray:
     """Whether each candidate stop sees every target of its row of ``sees`` from all of the
-    ring of ``site.tolerance_m`` around it, from itself, and from its position as written."""
+    ring of ``site.tolerance_m`` around it, from itself, and from its position as written;
+    with ``also``, and passes that check too (given the indices of the stops still standing
+    once the targets are in view, before any line of sight is walked)."""
     cam = site.camera
     # Every target from the ring around the candidate (and from the candidate itself).
     angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
@@ -189,20 +199,29 @@ def _sees_all(
     eye = (cand[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
     pair_stop = np.repeat(stop, len(offsets))
     pair_target = np.repeat(target, len(offsets))
+    on_ring = np.tile(np.arange(len(offsets)) > 0, len(stop))
     at = None if heading is None else np.repeat(heading[stop], len(offsets))
     if site.written is not None:
         # The position as written, seen from exactly there.
         eye = np.vstack([eye, site.written(cand[stop])])
         pair_stop = np.concatenate([pair_stop, stop])
         pair_target = np.concatenate([pair_target, target])
+        on_ring = np.concatenate([on_ring, np.zeros(len(stop), dtype=bool)])
         at = None if at is None or heading is None else np.concatenate([at, heading[stop]])
     tx, tg = site.targets_xy[pair_target], site.ground_m[pair_target]
-    seen = cam.in_view(eye, tx, tg, at)
-    e3 = np.column_stack([eye[seen], np.full(int(seen.sum()), cam.altitude_m)])
-    t3 = np.column_stack([tx[seen], tg[seen]])
-    seen[seen] = line_of_sight(site.terrain, e3, t3, site.workers)
     failed = np.zeros(len(cand), dtype=bool)
+    seen = cam.in_view(eye, tx, tg, at)
     failed[pair_stop[~seen]] = True
+    if also is not None and not failed.all():
+        standing = np.flatnonzero(~failed)
+        failed[standing] = ~also(standing)
+    for ring in (False, True):
+        walk = seen & (on_ring == ring) & ~failed[pair_stop]
+        if walk.any():
+            e3 = np.column_stack([eye[walk], np.full(int(walk.sum()), cam.altitude_m)])
+            t3 = np.column_stack([tx[walk], tg[walk]])
+            clear = line_of_sight(site.terrain, e3, t3, site.workers)
+            failed[pair_stop[walk][~clear]] = True
     return ~failed
 
 
