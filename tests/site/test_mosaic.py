@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 import rasterio
 from rasterio.transform import from_origin
 
@@ -87,9 +88,12 @@ def test_area_max_is_the_highest_valid_cell(tmp_path: Path) -> None:
     assert want - 0.05 <= got <= want
 
 
-def test_growing_areas_and_the_mosaic_decompress_each_block_once(tmp_path: Path) -> None:
+@pytest.mark.parametrize("workers", [1, 3])
+def test_growing_areas_and_the_mosaic_decompress_each_block_once(
+    tmp_path: Path, workers: int
+) -> None:
     """The altitude search's passes and the mosaic share one cache: the same maxima and cells
-    as reading afresh, and no block is decompressed twice."""
+    as reading afresh, and no block is decompressed twice, whatever the threads."""
     info = open_dem(_tiled(tmp_path))
     crs = info.horizontal_crs
     cache = BlockCache(info)
@@ -97,7 +101,7 @@ def test_growing_areas_and_the_mosaic_decompress_each_block_once(tmp_path: Path)
     cones = [_box(300, 400, 40), _box(700, 650, 30)]
     for half_m in (15.0, 60.0, 130.0, 250.0):
         area = (centre[0] - half_m, centre[1] - half_m, centre[0] + half_m, centre[1] + half_m)
-        assert area_max(info, crs, area, cache, cones) == area_max(info, crs, area)
+        assert area_max(info, crs, area, cache, cones, workers) == area_max(info, crs, area)
     assert cache.again == 0
     seen = cache.decompressed
     assert 0 < len(cache.cells) < seen

@@ -190,7 +190,7 @@ def read_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
     # The ground under the points first, from the few cells around each.
     ground = check_ground(
         info,
-        sample_points(info, crs, points_xy),
+        sample_points(info, crs, points_xy, settings.workers),
         [*(f"target '{n}'" for n in site.names), f"home ({site.home_source})"],
         [*((t.lat_deg, t.lon_deg) for t in site.targets.targets), site.home_lat_lon],
     )[:-1]
@@ -208,7 +208,7 @@ def read_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
     )
     cache = BlockCache(info)
     area = _bbox(points_xy, 0.0)
-    top = area_max(info, crs, area, cache, cone_boxes(altitude))
+    top = area_max(info, crs, area, cache, cone_boxes(altitude), settings.workers)
     for _ in range(12):
         altitude = (
             settings.altitude_m if settings.altitude_m is not None else (top + settings.clearance_m)
@@ -219,7 +219,7 @@ def read_area(site: SiteInputs, settings: PlanSettings) -> PlanArea:
             break
         require_window(info, cell_m, need, altitude, settings)
         area = need
-        top = area_max(info, crs, area, cache, cone_boxes(altitude))
+        top = area_max(info, crs, area, cache, cone_boxes(altitude), settings.workers)
     terrain = read_mosaic(info, crs, cone_boxes(altitude), cache)
     # Heights from the grid planned on: a geographic DEM's fitted georeferencing differs
     # slightly from one grid to the next, and every line of sight ends on the target.

@@ -14,6 +14,9 @@ block by block; a :class:`BlockCache` keeps any block from being decompressed tw
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -26,7 +29,7 @@ import rasterio.warp
 import rasterio.windows
 from affine import Affine
 
-from urpt_gcs.arrays import FloatArray
+from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.errors import DemError
 from urpt_gcs.memory import require_memory
 from urpt_gcs.site.dem import DemInfo, clean_elevations, first_line, open_raster
@@ -272,70 +275,108 @@ def area_max(
     area: tuple[float, float, float, float],
     cache: BlockCache | None = None,
     keep: npt.ArrayLike | None = None,
+    workers: int | None = 1,
 ) -> float:
     """The highest valid elevation (metres) in ``area``; NaN when the area holds none.
 
-    Blocks are read one at a time, and with a ``cache`` each only once over successive calls:
-    a block already read contributes its recorded maxima. The cells of blocks that boxes
-    ``keep`` (xmin, ymin, xmax, ymax in ``crs``) touch are kept in the cache for
-    :func:`read_mosaic`; other blocks' cells are dropped once their maxima are known, unless
-    the area cuts them on both axes (a later, wider area needs their exact maximum).
+    Blocks are decompressed by ``workers`` threads (None: one per core), each with its own
+    handle on the file, and with a ``cache`` each only once over successive calls: a block
+    already read contributes its recorded maxima. The cells of blocks that boxes ``keep``
+    (xmin, ymin, xmax, ymax in ``crs``) touch are kept in the cache for :func:`read_mosaic`;
+    other blocks' cells are dropped once their maxima are known, unless the area cuts them on
+    both axes (a later, wider area needs their exact maximum).
     """
     cache = BlockCache(info) if cache is None else cache
     box = [int(v) for v in pixel_boxes(info, crs, [area])[0]]
     keep_px = np.zeros((0, 4), dtype=np.int64) if keep is None else pixel_boxes(info, crs, keep)
     top = -math.inf
     try:
-        with open_raster(info.path) as src:
-            if cache.block_px is None:
+        if cache.block_px is None:
+            with open_raster(info.path) as src:
                 cache.block_px = _block_shape(src, info.band)
-            bh, bw = cache.block_px
-            for j in range(box[1] // bh, -(-box[3] // bh)):
-                for i in range(box[0] // bw, -(-box[2] // bw)):
-                    c0, r0, c1, r1 = cache.block_window(j, i)
-                    a, b = max(c0, box[0]), max(r0, box[1])
-                    c, d = min(c1, box[2]), min(r1, box[3])
-                    if c <= a or d <= b:
-                        continue
-                    cut_cols, cut_rows = (a, c) != (c0, c1), (b, d) != (r0, r1)
-                    key = (j, i)
-                    z = cache.cells.get(key)
-                    if key not in cache.maxima or (z is None and cut_cols and cut_rows):
-                        # A block first seen uncut on an axis is cut on both only when the
-                        # area shrinks, which the altitude search never does.
-                        cache.again += key in cache.maxima
-                        z = _block_cells(info, src, (c0, r0, c1, r1))
-                        cache.decompressed += 1
-                        cache.maxima[key] = (float(_top(z)), _top(z, 0), _top(z, 1))
-                    whole, col_top, row_top = cache.maxima[key]
-                    if cut_cols and cut_rows:
-                        assert z is not None
-                        here = float(_top(z[b - r0 : d - r0, a - c0 : c - c0]))
-                    elif cut_cols:
-                        here = float(col_top[a - c0 : c - c0].max())
-                    elif cut_rows:
-                        here = float(row_top[b - r0 : d - r0].max())
-                    else:
-                        here = whole
-                    top = max(top, here)
-                    kept = bool(
-                        (
-                            (keep_px[:, 0] < c1)
-                            & (keep_px[:, 2] > c0)
-                            & (keep_px[:, 1] < r1)
-                            & (keep_px[:, 3] > r0)
-                        ).any()
-                    )
-                    if z is not None and (kept or (cut_cols and cut_rows)):
-                        cache.cells[key] = z
-                    else:
-                        cache.cells.pop(key, None)
+        bh, bw = cache.block_px
+        # (key, block window, cut on columns, cut on rows, cells kept) per block in the area.
+        blocks = []
+        for j in range(box[1] // bh, -(-box[3] // bh)):
+            for i in range(box[0] // bw, -(-box[2] // bw)):
+                c0, r0, c1, r1 = cache.block_window(j, i)
+                a, b = max(c0, box[0]), max(r0, box[1])
+                c, d = min(c1, box[2]), min(r1, box[3])
+                if c <= a or d <= b:
+                    continue
+                cut_cols, cut_rows = (a, c) != (c0, c1), (b, d) != (r0, r1)
+                kept = bool(
+                    (
+                        (keep_px[:, 0] < c1)
+                        & (keep_px[:, 2] > c0)
+                        & (keep_px[:, 1] < r1)
+                        & (keep_px[:, 3] > r0)
+                    ).any()
+                )
+                blocks.append(((j, i), (c0, r0, c1, r1), cut_cols, cut_rows, kept))
+        # A block first seen uncut on an axis is cut on both only when the area shrinks,
+        # which the altitude search never does.
+        todo = [
+            (key, window, kept or (cut_cols and cut_rows))
+            for key, window, cut_cols, cut_rows, kept in blocks
+            if key not in cache.maxima or (cache.cells.get(key) is None and cut_cols and cut_rows)
+        ]
+        for key, maxima, z in _decompress(info, todo, workers):
+            cache.again += key in cache.maxima
+            cache.decompressed += 1
+            cache.maxima[key] = maxima
+            if z is not None:
+                cache.cells[key] = z
+        for key, (c0, r0, c1, r1), cut_cols, cut_rows, kept in blocks:
+            a, b = max(c0, box[0]), max(r0, box[1])
+            c, d = min(c1, box[2]), min(r1, box[3])
+            whole, col_top, row_top = cache.maxima[key]
+            z = cache.cells.get(key)
+            if cut_cols and cut_rows:
+                assert z is not None
+                here = float(_top(z[b - r0 : d - r0, a - c0 : c - c0]))
+            elif cut_cols:
+                here = float(col_top[a - c0 : c - c0].max())
+            elif cut_rows:
+                here = float(row_top[b - r0 : d - r0].max())
+            else:
+                here = whole
+            top = max(top, here)
+            if not (kept or (cut_cols and cut_rows)):
+                cache.cells.pop(key, None)
     except rasterio.errors.RasterioError as exc:
         raise DemError(
             f"DEM '{info.path}' could not be read ({first_line(exc)}): "
             "the file may be truncated; export it again"
         ) from exc
     return top if math.isfinite(top) else math.nan
+
+
+_Maxima = tuple[float, FloatArray, FloatArray]
+
+
+def _decompress(
+    info: DemInfo,
+    todo: list[tuple[tuple[int, int], tuple[int, int, int, int], bool]],
+    workers: int | None,
+) -> list[tuple[tuple[int, int], _Maxima, ElevationArray | None]]:
+    """Each block of ``todo`` (key, window, whether its cells are kept) decompressed: its
+    maxima, and its cells where kept. The blocks are shared among threads in runs, each
+    run read through a handle of its own (GDAL releases the interpreter while it
+    decompresses); a block's cells not kept are dropped as soon as its maxima are known."""
+
+    def run(part: list[tuple[tuple[int, int], tuple[int, int, int, int], bool]]) -> list[Any]:
+        done = []
+        with open_raster(info.path) as src:
+            for key, window, kept in part:
+                z = _block_cells(info, src, window)
+                done.append((key, (float(_top(z)), _top(z, 0), _top(z, 1)), z if kept else None))
+        return done
+
+    if not todo:
+        return []
+    parts = _in_threads(lambda part: run([todo[k] for k in part.tolist()]), len(todo), workers)
+    return [item for got in parts for item in got]
 
 
 def read_mosaic(
@@ -504,9 +545,12 @@ def fill_along(info: DemInfo, terrain: Terrain, start_xy: FloatArray, end_xy: Fl
 _STEP_PX = 32.0
 
 
-def sample_points(info: DemInfo, crs: pyproj.CRS, xy: FloatArray) -> FloatArray:
+def sample_points(
+    info: DemInfo, crs: pyproj.CRS, xy: FloatArray, workers: int | None = 1
+) -> FloatArray:
     """Bilinear ground elevation (metres) at points in ``crs``, each from the few cells
-    around it; NaN off the raster or next to nodata."""
+    around it; NaN off the raster or next to nodata. ``workers`` threads (None: one per
+    core) share the points, each reading through a handle of its own."""
     pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     sx, sy = pts[:, 0], pts[:, 1]
     if info.needs_warp or crs != info.horizontal_crs:
@@ -516,9 +560,10 @@ def sample_points(info: DemInfo, crs: pyproj.CRS, xy: FloatArray) -> FloatArray:
     cols = inv.a * sx + inv.b * sy + inv.c
     rows = inv.d * sx + inv.e * sy + inv.f
     out = np.full(len(pts), np.nan)
-    try:
+
+    def run(part: IntArray) -> None:
         with open_raster(info.path) as src:
-            for k in range(len(pts)):
+            for k in part.tolist():
                 if not (np.isfinite(cols[k]) and np.isfinite(rows[k])):
                     continue
                 c0 = max(math.floor(cols[k]) - 2, 0)
@@ -533,9 +578,28 @@ def sample_points(info: DemInfo, crs: pyproj.CRS, xy: FloatArray) -> FloatArray:
                     np.ma.getdata(band), np.ma.getmaskarray(band), info.vertical_unit.to_m
                 )
                 out[k] = bilinear_at(z, cols[k] - c0 - 0.5, rows[k] - r0 - 0.5)
+
+    try:
+        _in_threads(run, len(pts), workers)
     except rasterio.errors.RasterioError as exc:
         raise DemError(
             f"DEM '{info.path}' could not be read ({first_line(exc)}): "
             "the file may be truncated; export it again"
         ) from exc
     return out
+
+
+# Below this many items per thread, reading them in threads costs more than it saves.
+_LEAST_PER_THREAD = 16
+
+
+def _in_threads(run: Callable[[IntArray], Any], count: int, workers: int | None) -> list[Any]:
+    """``run`` over the indices ``0 .. count``, shared among up to ``workers`` threads
+    (None: one per core) as interleaved parts; their results in part order."""
+    cores = max(1, os.cpu_count() or 1) if workers is None else max(1, workers)
+    threads = min(cores, max(count // _LEAST_PER_THREAD, 1))
+    index = np.arange(count, dtype=np.int64)
+    if threads <= 1:
+        return [run(index)]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(run, [index[k::threads] for k in range(threads)]))
