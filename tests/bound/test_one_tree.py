@@ -93,7 +93,7 @@ def test_the_certificate_over_300_targets_covers_every_one() -> None:
     ground = terrain.sample(targets[:, 0], targets[:, 1])
     camera = Camera(ALTITUDE, 40.0)
     home = (float(targets[:, 0].mean()), float(targets[:, 1].mean()))
-    # No time for walks past the first ones: the others keep their cone's disc.
+    # No time for walks past the first chunk: the others keep their cone's disc.
     regions, _ = outer_regions(terrain, targets, ground, camera, home, time_limit_s=0.0)
     assert regions.n == 300
     discs = [bool(np.all(s.reach_m == s.reach_m[0])) for s in regions.outer]

@@ -36,10 +36,10 @@ __all__ = [
     "warm_up",
 ]
 
-# Stars walked on the DEM whatever the clock (the farthest apart first, the ones the order
-# search bounds); the others are walked while the time allowed lasts, in chunks of this
-# many per worker, and the rest keep their camera cone's disc (which holds every point
-# that sees the target).
+# Up to this many targets (those the order search bounds, all of them) every star is walked
+# on the DEM whatever the clock. Beyond, the stars are walked farthest apart first, in chunks
+# of this many per worker, while the time allowed lasts (the first chunk always), and the
+# rest keep their camera cone's disc (which holds every point that sees the target).
 WALKED_ALWAYS = 150
 _WALK_CHUNK = 16
 # Sectors per outer star: the finest up to this many regions, then fewer, down to the least.
@@ -84,17 +84,17 @@ def _walked(
     workers: int | None,
     time_limit_s: float,
 ) -> tuple[FloatArray, FloatArray]:
-    """Outer and inner reaches: walked for the stars farthest apart and for as many others
-    as the time allows, the cone's disc (and nothing known inside) for the rest."""
+    """Outer and inner reaches: walked for every star up to :data:`WALKED_ALWAYS` targets,
+    else for the stars farthest apart first while the time allows, the cone's disc (and
+    nothing known inside) for the rest."""
     started = time.perf_counter()
     cone = camera.cone_radius_m(ground)
     outer = np.repeat(np.asarray(cone, dtype=np.float64)[:, None], sectors, axis=1)
     inner = np.zeros_like(outer)
     first = _spread_order(xy, cone, depot_xy, WALKED_ALWAYS)
-    rest = np.setdiff1d(np.arange(len(xy)), first)
+    order = np.concatenate([first, np.setdiff1d(np.arange(len(xy)), first)]).astype(np.int64)
     chunk = _WALK_CHUNK * max(1, workers or 1)
-    batches = [np.asarray(first, dtype=np.int64)]
-    batches += [rest[k : k + chunk] for k in range(0, rest.size, chunk)]
+    batches = [order] if len(xy) <= WALKED_ALWAYS else np.array_split(order, -(-len(xy) // chunk))
     for k, idx in enumerate(batches):
         if k > 0 and time.perf_counter() - started >= time_limit_s:
             break
@@ -125,9 +125,10 @@ def outer_regions(
     """Every target's outer star as a region to enter, home as the depot, and the ratio of
     the stars' area to what is certainly seen.
 
-    The :data:`WALKED_ALWAYS` stars farthest apart are walked on the DEM; the others while
-    ``time_limit_s`` lasts, and those left keep the disc of the camera's cone about their
-    target (nothing outside it sees the target; nothing is known seen inside).
+    Up to :data:`WALKED_ALWAYS` targets every star is walked on the DEM; beyond, the stars
+    farthest apart first while ``time_limit_s`` lasts, and those left keep the disc of the
+    camera's cone about their target (nothing outside it sees the target; nothing is known
+    seen inside).
 
     With ``hold_m`` > 0 the regions are where a stop sees its target from anywhere within
     ``hold_m`` of it (the plan's position tolerance): such a stop ``p`` at angle ``t`` from the
