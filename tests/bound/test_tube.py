@@ -130,3 +130,21 @@ def test_on_crowded_regions_the_bound_counts_them_all() -> None:
     assert bound.method.startswith("tube")
     assert bound.value == pytest.approx(tube)
     assert tube <= tour
+
+
+def test_radii_with_too_many_overlapping_pairs_are_not_tried(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Above the pairs' cap a radius is skipped (its arrays are never made), and the bound
+    keeps the best of the radii below it: never more than with every radius tried."""
+    import urpt_gcs.bound.tube as tube
+
+    rng = np.random.default_rng(9)
+    xy = rng.uniform(0, 1000.0, (600, 2))
+    reach = rng.uniform(10.0, 30.0, 600)
+    full, _ = tube_bound(xy, reach, (500.0, 500.0))
+    monkeypatch.setattr(tube, "TUBE_MAX_PAIRS", 400)
+    assert math.isnan(union_area(xy, np.full(600, 60.0)))
+    capped, s = tube_bound(xy, reach, (500.0, 500.0))
+    assert 0.0 <= capped <= full
+    assert capped == 0.0 or s > 0.0

@@ -35,13 +35,16 @@ from urpt_gcs.arrays import FloatArray
 
 __all__ = ["TUBE_MAX_PAIRS", "tube_bound", "union_area"]
 
-# Ratios of the tube's radius to the regions' median reach tried first (the best of them is
-# then refined between its neighbours): the bound rises while the discs still grow into gaps
-# between them and falls once they cover the site.
-_FIRST_RATIOS = (1.1, 1.3, 1.6, 2.0, 2.5, 3.2, 4.0, 5.5, 8.0)
+# Ratios of the tube's radius to the regions' median reach, tried from the smallest up until
+# the bound has fallen twice in a row past its best (it rises while the discs grow into the
+# gaps between them and falls once they cover the site); the best is then refined between
+# its neighbours.
+_RATIOS = (1.1, 1.3, 1.6, 2.0, 2.5, 3.2, 4.0, 5.5, 8.0)
+_FALLS = 2
 _REFINE_STEPS = 4
-# A radius whose discs overlap in more pairs than this is not tried (memory and time).
-TUBE_MAX_PAIRS = 20_000_000
+# A radius whose discs overlap in more pairs than this is not tried, nor any larger (the
+# pairs' arrays take some 90 bytes each).
+TUBE_MAX_PAIRS = 2_000_000
 # The union's area is lowered by this share: its rounding is many orders smaller.
 _AREA_SLACK = 1e-7
 
@@ -77,17 +80,29 @@ def tube_bound(
     def at(s: float) -> float:
         if s not in tried:
             area = union_area(xy, s - reach)
-            tried[s] = max((area - math.pi * s * s) / (2.0 * s), 0.0)
+            # NaN (too many pairs to list) stays NaN.
+            tried[s] = area if math.isnan(area) else max((area - math.pi * s * s) / (2.0 * s), 0.0)
         return tried[s]
 
-    ratios = list(_FIRST_RATIOS)
-    values = [at(r * scale) for r in ratios]
-    k = int(np.argmax(values))
+    falls = 0
+    for r in _RATIOS:
+        value = at(r * scale)
+        if math.isnan(value):
+            break
+        falls = falls + 1 if value < max(tried.values()) else 0
+        if falls >= _FALLS:
+            break
+    ratios = [r for r in _RATIOS if r * scale in tried]
+    values = [tried[r * scale] for r in ratios]
+    k = int(np.nanargmax(values)) if np.isfinite(values).any() else 0
     lo = ratios[max(k - 1, 0)]
     hi = ratios[min(k + 1, len(ratios) - 1)]
     for r in np.linspace(lo, hi, _REFINE_STEPS + 2)[1:-1]:
         at(float(r) * scale)
-    s, best = max(tried.items(), key=lambda item: item[1])
+    done = {at_s: v for at_s, v in tried.items() if math.isfinite(v)}
+    if not done:
+        return 0.0, 0.0
+    s, best = max(done.items(), key=lambda item: item[1])
     if best <= 0.0:
         return 0.0, 0.0
     return best, s
@@ -107,9 +122,12 @@ def union_area(centres_xy: FloatArray, radius_m: FloatArray) -> float:
     # About the discs' middle: far from the origin (a projected CRS's millions of metres) the
     # arcs' terms would be large and cancel.
     xy = xy - 0.5 * (xy.min(axis=0) + xy.max(axis=0))
-    pairs = cKDTree(xy).query_pairs(2.0 * float(r.max()), output_type="ndarray")
-    if len(pairs) > TUBE_MAX_PAIRS:
+    tree = cKDTree(xy)
+    reach = 2.0 * float(r.max())
+    # Counted before they are listed: memory linear in the discs.
+    if int(tree.query_ball_point(xy, reach, return_length=True).sum()) > 2 * TUBE_MAX_PAIRS + n:
         return math.nan
+    pairs = tree.query_pairs(reach, output_type="ndarray")
     i, j = pairs[:, 0], pairs[:, 1]
     d = np.hypot(xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1])
     meet = d < r[i] + r[j]
