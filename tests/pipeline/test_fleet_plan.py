@@ -481,3 +481,14 @@ def test_a_second_sharing_that_is_refused_leaves_the_first(
     first, second = (p.flight_time_s for p in result.plans)
     assert result.makespan_s == pytest.approx(max(first, 30.0 + second))
     assert result.makespan_s >= result.bound.bound_s
+
+
+def test_a_fleet_file_is_read_from_a_path_given_as_text(tmp_path: Path) -> None:
+    from urpt_gcs.pipeline.settings import read_fleet
+
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text("[[vehicle]]\nspeed_m_s = 6.0\n\n[[vehicle]]\nendurance_min = 12\n")
+    assert read_fleet(str(fleet)) == read_fleet(fleet)
+    assert [v.speed_m_s for v in read_fleet(str(fleet))] == [6.0, None]
+    with pytest.raises(SettingsError, match="does not exist"):
+        read_fleet(str(tmp_path / "missing.toml"))

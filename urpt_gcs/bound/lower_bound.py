@@ -60,6 +60,7 @@ __all__ = [
     "piece_costs",
     "skipped_regions",
     "split",
+    "spread_order",
     "spread_subset",
     "start_pieces",
     "subset_bound",
@@ -609,11 +610,29 @@ def lower_bound(
 
 def spread_subset(regions: RegionSet, k: int) -> list[int]:
     """``k`` regions far apart (farthest-point order by the distance between enclosing
-    discs), starting from the one farthest from the depot (or from region 0)."""
+    discs), starting from the one farthest from the depot (or from region 0); regions that
+    hold the depot are left out."""
     cx, cy, cr = _star_discs(regions)
-    skip = skipped_regions(regions)
-    if regions.depot_xy is not None:
-        gap = np.hypot(cx - regions.depot_xy[0], cy - regions.depot_xy[1]) - cr
+    return spread_order(
+        np.column_stack([cx, cy]), cr, regions.depot_xy, k, skipped_regions(regions)
+    )
+
+
+def spread_order(
+    xy: FloatArray,
+    radius_m: FloatArray,
+    depot_xy: tuple[float, float] | None,
+    k: int,
+    skip: npt.NDArray[np.bool_] | None = None,
+) -> list[int]:
+    """``k`` of the discs (centres ``xy``, radii ``radius_m``) far apart: farthest-point
+    order by the gap between discs, starting from the disc farthest from the depot (or from
+    disc 0), those ``skip`` marks left out."""
+    cx, cy = xy[:, 0], xy[:, 1]
+    cr = np.asarray(radius_m, dtype=np.float64)
+    skip = np.zeros(len(cr), dtype=np.bool_) if skip is None else skip
+    if depot_xy is not None:
+        gap = np.hypot(cx - depot_xy[0], cy - depot_xy[1]) - cr
     else:
         gap = np.hypot(cx - cx[0], cy - cy[0]) - cr - cr[0]
     gap = np.where(skip, -np.inf, gap)

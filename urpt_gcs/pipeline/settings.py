@@ -295,7 +295,7 @@ def plan_settings(values: Mapping[str, Any]) -> PlanSettings:
     )
 
 
-def read_fleet(path: Path) -> tuple[VehicleSpec, ...]:
+def read_fleet(path: Path | str) -> tuple[VehicleSpec, ...]:
     """The vehicles of a fleet file: one ``[[vehicle]]`` table each, with any of
     ``home_lat``/``home_lon`` (together), ``speed_m_s``, ``endurance_min``, ``altitude_m``.
 
@@ -305,6 +305,7 @@ def read_fleet(path: Path) -> tuple[VehicleSpec, ...]:
         One line naming the file (as the setting ``fleet_file``), the vehicle, the key and
         the fix.
     """
+    path = Path(path)
     try:
         text = path.read_bytes().decode("utf-8")
     except FileNotFoundError:

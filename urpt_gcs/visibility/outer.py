@@ -20,6 +20,7 @@ from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.certificate import Tighten
+from urpt_gcs.bound.lower_bound import spread_order
 from urpt_gcs.problem.regions import OuterStar, RegionSet
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import Camera
@@ -58,22 +59,6 @@ _TOUCH = 1e-3
 _TOUCH_EDGE = 0.05
 
 
-def _spread_order(
-    xy: FloatArray, radius_m: FloatArray, depot_xy: tuple[float, float] | None, k: int
-) -> list[int]:
-    """``k`` targets whose discs lie far apart (farthest-point order), from the one farthest
-    from the depot (or from target 0)."""
-    origin = xy[0] if depot_xy is None else np.asarray(depot_xy, dtype=np.float64)
-    gap = np.hypot(*(xy - origin).T) - radius_m
-    chosen: list[int] = []
-    for _ in range(min(k, len(xy))):
-        j = int(np.argmax(gap))
-        chosen.append(j)
-        gap = np.minimum(gap, np.hypot(*(xy - xy[j]).T) - radius_m - radius_m[j])
-        gap[chosen] = -np.inf
-    return chosen
-
-
 def _walked(
     terrain: Terrain,
     xy: FloatArray,
@@ -91,7 +76,7 @@ def _walked(
     cone = camera.cone_radius_m(ground)
     outer = np.repeat(np.asarray(cone, dtype=np.float64)[:, None], sectors, axis=1)
     inner = np.zeros_like(outer)
-    first = _spread_order(xy, cone, depot_xy, WALKED_ALWAYS)
+    first = spread_order(xy, cone, depot_xy, WALKED_ALWAYS)
     order = np.concatenate([first, np.setdiff1d(np.arange(len(xy)), first)]).astype(np.int64)
     chunk = _WALK_CHUNK * max(1, workers or 1)
     batches = [order] if len(xy) <= WALKED_ALWAYS else np.array_split(order, -(-len(xy) // chunk))
