@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import math
 
 import numpy as np
@@ -10,7 +9,8 @@ import pytest
 import shapely
 from conftest import CETSP, needs_shared
 from shapely.geometry import Polygon
-from support.brute_tours import brute_force_tour, disc_grid
+from support.brute_tours import brute_force_tour, disc_grid, small_discs
+from support.cetsp import proven_optima
 
 from urpt_gcs.bench.cetsp import read_instance
 from urpt_gcs.bound.lower_bound import lower_bound, skipped_regions, start_pieces
@@ -72,13 +72,7 @@ def test_pieces_cover_the_outer_stars() -> None:
 
 
 def _proven_all(most_discs: int = 100) -> list[tuple[str, float]]:
-    if not (CETSP / "best_known.csv").is_file():
-        return []
-    with (CETSP / "best_known.csv").open(encoding="utf-8", newline="") as f:
-        rows = [r for r in csv.DictReader(f) if r["proven_optimal"] == "yes"]
-    return [
-        (r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= most_discs
-    ]
+    return proven_optima(CETSP, most_discs)
 
 
 def _proven() -> list[tuple[str, float]]:
@@ -96,12 +90,8 @@ def test_bound_never_above_a_proven_cetsp_optimum(name: str, optimum: float) -> 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_order_bound_is_below_and_close_to_a_brute_force_tour(seed: int) -> None:
-    rng = np.random.default_rng(100 + seed)
-    n = 5
-    discs = np.column_stack([rng.uniform(0, 20, n), rng.uniform(0, 20, n), rng.uniform(0.5, 3, n)])
-    depot = (10.0, 10.0) if seed % 2 == 0 else None
+    discs, depot, brute = small_discs(100 + seed, 20.0, 3.0, 9)
     regions = RegionSet(discs=discs, depot_xy=depot)
-    brute = brute_force_tour([disc_grid(*d, 15 if depot else 9) for d in discs], depot)
     bound = lower_bound(regions, upper=brute * 1.5, time_limit_s=5.0, method="order")
     assert bound.order_finished
     assert bound.value <= brute * (1.0 + 1e-9)

@@ -4,14 +4,14 @@ flights, and the bound against brute-force tours and proven CETSP optima."""
 
 from __future__ import annotations
 
-import csv
 import math
 
 import numpy as np
 import pytest
 import shapely
 from conftest import CETSP, needs_shared
-from support.brute_tours import brute_force_tour, disc_grid
+from support.brute_tours import small_discs
+from support.cetsp import proven_optima
 
 from urpt_gcs.bench.cetsp import read_instance
 from urpt_gcs.bound.lower_bound import lower_bound
@@ -80,29 +80,15 @@ def test_a_flights_tube_covers_at_most_pi_s2_plus_2_s_l(seed: int) -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_tube_bound_never_above_a_brute_force_tour(seed: int) -> None:
-    rng = np.random.default_rng(40 + seed)
-    n = 5
     # Crowded discs, where the tube is positive.
-    discs = np.column_stack([rng.uniform(0, 12, n), rng.uniform(0, 12, n), rng.uniform(0.5, 2, n)])
-    depot = (6.0, 6.0) if seed % 2 == 0 else None
-    brute = brute_force_tour([disc_grid(*d, 15 if depot else 7) for d in discs], depot)
+    discs, depot, brute = small_discs(40 + seed, 12.0, 2.0, 7)
     got, s = tube_bound(discs[:, :2], discs[:, 2], depot)
     assert got <= brute * (1.0 + 1e-9)
     assert got == 0.0 or s > 0.0
 
 
-def _proven(most_discs: int) -> list[tuple[str, float]]:
-    if not (CETSP / "best_known.csv").is_file():
-        return []
-    with (CETSP / "best_known.csv").open(encoding="utf-8", newline="") as f:
-        rows = [r for r in csv.DictReader(f) if r["proven_optimal"] == "yes"]
-    return [
-        (r["name"], float(r["best_known_length"])) for r in rows if int(r["n_discs"]) <= most_discs
-    ]
-
-
 @needs_shared("bench/cetsp")
-@pytest.mark.parametrize(("name", "optimum"), _proven(1000))
+@pytest.mark.parametrize(("name", "optimum"), proven_optima(CETSP, 1000))
 def test_tube_bound_never_above_a_proven_cetsp_optimum(name: str, optimum: float) -> None:
     regions = read_instance(CETSP / "instances" / f"{name}.txt")
     assert regions.discs is not None

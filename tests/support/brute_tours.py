@@ -8,7 +8,7 @@ import itertools
 
 import numpy as np
 
-__all__ = ["brute_force_tour", "disc_grid"]
+__all__ = ["brute_force_tour", "disc_grid", "small_discs"]
 
 
 def disc_grid(x: float, y: float, r: float, k: int) -> np.ndarray:
@@ -46,3 +46,20 @@ def brute_force_tour(sets: list[np.ndarray], depot: tuple[float, float] | None) 
             if depot is not None:
                 break
     return best
+
+
+def small_discs(
+    seed: int, side: float, widest: float, coarse: int
+) -> tuple[np.ndarray, tuple[float, float] | None, float]:
+    """Five seeded discs in a ``side`` square (radii 0.5 to ``widest``), home at its centre
+    for even seeds and none for odd ones, and the brute-force tour through them (grids of 15
+    points a side, or ``coarse`` without home, where every point of the first disc is a
+    start)."""
+    rng = np.random.default_rng(seed)
+    n = 5
+    discs = np.column_stack(
+        [rng.uniform(0, side, n), rng.uniform(0, side, n), rng.uniform(0.5, widest, n)]
+    )
+    depot = (side / 2, side / 2) if seed % 2 == 0 else None
+    brute = brute_force_tour([disc_grid(*d, 15 if depot else coarse) for d in discs], depot)
+    return discs, depot, brute
