@@ -13,7 +13,8 @@ from support.brute_tours import brute_force_tour, disc_grid, small_discs
 from support.cetsp import proven_optima
 
 from urpt_gcs.bench.cetsp import read_instance
-from urpt_gcs.bound.lower_bound import lower_bound, skipped_regions, start_pieces
+from urpt_gcs.bound.lower_bound import lower_bound
+from urpt_gcs.bound.pieces import skipped_regions, start_pieces
 from urpt_gcs.problem.regions import RegionSet
 
 

@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from urpt_gcs.bound.lower_bound import lower_bound, start_pieces
+from urpt_gcs.bound.lower_bound import lower_bound
 from urpt_gcs.bound.one_tree import one_tree_bound
+from urpt_gcs.bound.pieces import start_pieces
 from urpt_gcs.problem.regions import RegionSet
 
 

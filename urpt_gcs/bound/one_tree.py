@@ -34,7 +34,7 @@ I64 = npt.NDArray[np.int64]
 
 
 class _Pieces(Protocol):
-    """Annular sectors by region, as :class:`urpt_gcs.bound.lower_bound.Pieces` holds them."""
+    """Annular sectors by region, as :class:`urpt_gcs.bound.pieces.Pieces` holds them."""
 
     @property
     def region(self) -> I64: ...
