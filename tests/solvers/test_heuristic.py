@@ -372,3 +372,50 @@ def test_local_search_in_slices_reaches_the_same_tour(budget: int) -> None:
     assert cost == pytest.approx(want) and np.array_equal(sliced, whole)
     assert cost < 0.5 * ls.cycle_cost(p.kernel_args, first, m)
     assert calls > 1
+
+
+def _overlapping_plane(seed: int) -> Instance:
+    """Five targets; each seen from two viewpoints near it, and three wide viewpoints each
+    seeing three targets, off the short way round."""
+    rng = np.random.default_rng(seed)
+    centres = rng.random((5, 2)) * 100.0
+    near = np.repeat(centres, 2, axis=0) + rng.normal(scale=5.0, size=(10, 2))
+    wide = rng.random((3, 2)) * 100.0
+    vp = [*range(10), 10, 10, 10, 11, 11, 11, 12, 12, 12]
+    tg = [*np.repeat(np.arange(5), 2), *rng.permutation(5)[:3], *rng.permutation(5)[:3]]
+    tg += list(rng.permutation(5)[:3])
+    return Instance.from_cover_pairs(
+        np.asarray(vp), np.asarray(tg), np.vstack([near, wide]), 5, depot_xy=(50.0, 50.0)
+    )
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("stop_cost", [0.0, 40.0, 400.0])
+def test_a_stop_cost_on_the_plane_is_weighed_against_the_length(
+    seed: int, stop_cost: float
+) -> None:
+    """The search minimises length plus the cost of each stop (brute force over every
+    sequence of distinct viewpoints that sees all); the tour's length stays its length."""
+    instance = _overlapping_plane(seed)
+    assert instance.distance is None
+    best = math.inf
+    for size in range(1, 6):
+        for seq in itertools.permutations(range(instance.n_viewpoints), size):
+            if not instance.uncovered(seq):
+                best = min(best, instance.tour_length(seq) + stop_cost * size)
+    tour = HeuristicSolver().solve(
+        instance, SolveSettings(time_limit_s=2.0, seed=seed, stop_cost=stop_cost)
+    )
+    assert not instance.uncovered(tour.order)
+    pts = np.vstack([[50.0, 50.0], instance.points_xy[np.asarray(tour.order)], [50.0, 50.0]])
+    length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+    assert tour.length == pytest.approx(length, rel=1e-9)
+    assert length + stop_cost * len(tour.order) == pytest.approx(best, rel=1e-9)
+
+
+def test_a_stop_cost_must_be_a_finite_non_negative_number() -> None:
+    from urpt_gcs.errors import SettingsError
+
+    for bad in (-1.0, math.nan, math.inf):
+        with pytest.raises(SettingsError, match="stop_cost"):
+            SolveSettings(stop_cost=bad)

@@ -255,7 +255,10 @@ def plan_fleet(
     stages.lap("compile")
     single_s = SINGLE_SHARE * settings.solve.time_limit_s
     stages.say(f"solving the single-vehicle tour ({reference.n_viewpoints} viewpoints)")
-    single = solve(reference, solver, SolveSettings(single_s, settings.solve.seed))
+    stop_cost = settings.solve.stop_cost or flight_model(settings).stop_cost_m
+    single = solve(
+        reference, solver, SolveSettings(single_s, settings.solve.seed, stop_cost=stop_cost)
+    )
     if any(v < 0 for v in single.order):
         raise SettingsError.about(
             "{solver} {value} places its own stops, which a fleet cannot share out: use "

@@ -30,7 +30,7 @@ from urpt_gcs.pipeline.area import (
 )
 from urpt_gcs.pipeline.band import plan_in_band
 from urpt_gcs.pipeline.improve import bounds_tour, certify_flight, prepare_bound, refine_stops
-from urpt_gcs.pipeline.missions import sorties_and_missions
+from urpt_gcs.pipeline.missions import flight_model, sorties_and_missions
 from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages, solve_stage
@@ -78,7 +78,7 @@ def plan(
     area = read_area(site, settings)
     stages.lap("terrain")
     regions, instance = _viewpoints(site, area, settings, stages)
-    tour = solve_stage(instance, settings, stages)
+    tour = solve_stage(instance, settings, stages, flight_model(settings).stop_cost_m)
     return finish_plan(site, area, regions, instance, tour, settings, stages)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from urpt_gcs.pipeline.settings import PlanSettings
@@ -44,9 +45,13 @@ class Stages:
         self._clock = now
 
 
-def solve_stage(instance: Instance, settings: PlanSettings, stages: Stages) -> Tour:
+def solve_stage(
+    instance: Instance, settings: PlanSettings, stages: Stages, stop_cost_m: float = 0.0
+) -> Tour:
     """The solver's tour over the viewpoints, its kernels compiled first so that its time
-    limit is spent searching.
+    limit is spent searching; with ``stop_cost_m`` (unless the settings give their own), the
+    solvers that can weigh a stop's cost against the tour's length do (the heuristic, on
+    the plane).
 
     Parameters
     ----------
@@ -67,7 +72,10 @@ def solve_stage(instance: Instance, settings: PlanSettings, stages: Stages) -> T
     prepare(solver)
     stages.lap("compile")
     stages.say(f"solving ({instance.n_viewpoints} viewpoints)")
-    tour = solve(instance, solver, settings.solve)
+    solve_settings = settings.solve
+    if solve_settings.stop_cost == 0.0 and stop_cost_m > 0.0:
+        solve_settings = dataclasses.replace(solve_settings, stop_cost=stop_cost_m)
+    tour = solve(instance, solver, solve_settings)
     stages.lap("solve")
     return tour
 

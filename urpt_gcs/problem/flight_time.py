@@ -175,6 +175,12 @@ class FlightModel:
         """What each stop costs on top of its legs."""
         return self.settle_s + self.hold_s
 
+    @property
+    def stop_cost_m(self) -> float:
+        """What one more stop adds to a flight, as cruise metres: its settle and hold, and the
+        braking and speeding up of one more leg that reaches the cruise speed."""
+        return self.cruise_m_s * (self.stop_s + self.cruise_overhead()[1])
+
     def _ramp_s(self, speed_m_s: FloatArray) -> FloatArray:
         """Time from rest to ``speed_m_s`` (or back): the acceleration builds up at the jerk
         limit, and holds at ``accel_m_s2`` once the speed needs it."""

@@ -32,6 +32,10 @@ class SolveSettings:
     seed: int = 0
     # Threads the continuous order search for discs may run side by side.
     threads: int = 1
+    # What each stop costs on top of its legs, in the distances' unit (metres on the plane):
+    # the heuristic's search on the plane then weighs fewer stops against a longer tour.
+    # Lengths and bounds stay lengths. 0: none, or in a plan, the flight model's.
+    stop_cost: float = 0.0
 
     def __post_init__(self) -> None:
         # The messages name the settings; the CLI shows their flags (SettingsError.naming).
@@ -41,6 +45,10 @@ class SolveSettings:
             raise SettingsError.about(
                 "{time_limit_s} {value} must be a positive number of seconds",
                 value=self.time_limit_s,
+            )
+        if not (math.isfinite(self.stop_cost) and self.stop_cost >= 0.0):
+            raise SettingsError.about(
+                "{stop_cost} {value} must be a number of metres at least 0", value=self.stop_cost
             )
         # numpy's generators take only non-negative seeds; 32 bits is what every one accepts.
         if not 0 <= self.seed <= SEED_MAX:

@@ -26,6 +26,7 @@ short.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -175,6 +176,8 @@ class _Problem:
     neighbours: int
     sym: bool
     node_of: npt.NDArray[np.int64]  # internal node -> node of the partition form
+    # What a stop costs on top of its legs (on the plane only; see _ls_kernels).
+    stop_cost: float = 0.0
 
     @property
     def m(self) -> int:
@@ -192,10 +195,13 @@ class _Problem:
 
     @property
     def kernel_args(self) -> tuple[F64, F64, F64, I32, I32, I32, F64, int]:
+        xy = self.xy
+        if self.stop_cost > 0.0 and xy.shape[0] > 0:
+            xy = np.column_stack([xy, np.full(xy.shape[0], 0.5 * self.stop_cost)])
         return (
             self.d,
             self.dt,
-            self.xy,
+            xy,
             self.start,
             self.cl,
             self.nbr,
@@ -495,6 +501,8 @@ def solve_clustered(
         deadline = time.perf_counter() + settings.time_limit_s
     search = search or SearchSettings()
     p = _prepare(clustered, search.neighbours)
+    if settings.stop_cost > 0.0:
+        p = dataclasses.replace(p, stop_cost=settings.stop_cost)
     tour = _search(p, settings, search, deadline)
     return [int(v) for v in p.node_of[tour]]
 
