@@ -8,12 +8,12 @@ Conventions shared with :mod:`._lns_kernels`:
   ``u -> v`` (asymmetric allowed) and ``dt`` its transpose, C-contiguous, so that reading a
   column is reading a row, and ``xy`` is empty; or on the plane, ``xy[v]`` is node ``v``'s
   position, the cost is Euclidean, computed where needed, and ``d``, ``dt`` are empty, so that
-  memory stays linear in the nodes. A third column of ``xy``, when there is one, is half
-  of what a stop costs at each node: a leg between two distinct points costs their two
-  halves on top of its length, so a tour pays one stop's cost per point it stops at (and
-  the depot). ``nbr[c]`` lists other clusters nearest first (all of
-  them, ranked by ``setd``, the cluster-to-cluster distance, when explicit; the nearest few
-  by a spatial index, ``setd`` empty, on the plane), and moves look at the first ``kn``.
+  memory stays linear in the nodes. The third column of ``xy`` is half of what a stop costs
+  at each node (0 for none): a leg between two distinct points costs their two halves on top
+  of its length, so a tour pays one stop's cost per point it stops at (and the depot).
+  ``nbr[c]`` lists other clusters nearest first (all of them, ranked by ``setd``, the
+  cluster-to-cluster distance, when explicit; the nearest few by a spatial index, ``setd``
+  empty, on the plane), and moves look at the first ``kn``.
 - A tour is an int32 array ``t`` of nodes, one per cluster, read cyclically; a partial tour is
   its first ``n`` entries. ``pos[c]`` is the index of cluster ``c`` in ``t`` (-1: absent).
 - ``Q = (stack, queued, top)`` is the set of clusters the local search still has to look at
@@ -62,16 +62,14 @@ _DESCENT_SWEEPS = 4
 @njit(cache=True, nogil=True)
 def dist(P, u, v):  # type: ignore[no-untyped-def]
     """The cost of ``u -> v``: from the matrix, or Euclidean between the node positions (plus
-    their stop costs, a third column, between distinct points)."""
+    their halves of a stop's cost, the third column, between distinct points)."""
     xy = P[2]
     if xy.shape[0] == 0:
         return P[0][u, v]
     dx = xy[u, 0] - xy[v, 0]
     dy = xy[u, 1] - xy[v, 1]
     d = np.sqrt(dx * dx + dy * dy)
-    if xy.shape[1] > 2 and d > 0.0:
-        d += xy[u, 2] + xy[v, 2]
-    return d
+    return d + (xy[u, 2] + xy[v, 2]) * (d > 0.0)
 
 
 @njit(cache=True, nogil=True)
@@ -84,9 +82,7 @@ def dtr(P, u, v):  # type: ignore[no-untyped-def]
     dx = xy[u, 0] - xy[v, 0]
     dy = xy[u, 1] - xy[v, 1]
     d = np.sqrt(dx * dx + dy * dy)
-    if xy.shape[1] > 2 and d > 0.0:
-        d += xy[u, 2] + xy[v, 2]
-    return d
+    return d + (xy[u, 2] + xy[v, 2]) * (d > 0.0)
 
 
 @njit(cache=True, nogil=True)

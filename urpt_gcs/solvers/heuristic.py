@@ -196,7 +196,8 @@ class _Problem:
     @property
     def kernel_args(self) -> tuple[F64, F64, F64, I32, I32, I32, F64, int]:
         xy = self.xy
-        if self.stop_cost > 0.0 and xy.shape[0] > 0:
+        if xy.shape[0] > 0:
+            # Each node's half of a stop's cost beside its position (see _ls_kernels).
             xy = np.column_stack([xy, np.full(xy.shape[0], 0.5 * self.stop_cost)])
         return (
             self.d,
