@@ -268,7 +268,7 @@ def plan_fleet(
     stages.lap("single")
     budget = settings.solve.time_limit_s - single_s
     stages.say(f"sharing the targets among {len(vehicles)} vehicles (up to {budget:.1f} s)")
-    search = SolveSettings(budget, settings.solve.seed)
+    search = SolveSettings(budget, settings.solve.seed, stop_cost=stop_cost)
     solvers = (settings.solver, solver)
     tours, plans, separation = _shared(problem, fleet, single.order, solvers, search, None, stages)
     delays = separation.start_delays_s

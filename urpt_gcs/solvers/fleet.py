@@ -20,6 +20,7 @@ Nothing here sees a raster: only instances, points, distances and the flight mod
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -393,7 +394,7 @@ def solve_fleet(
         sub, kept = restrict(vehicles[k].instance, targets)
         name = choose(sub, solver)
         prepare(name)
-        tour = solve(sub, name, SolveSettings(time_limit_s=budget_s, seed=settings.seed))
+        tour = solve(sub, name, dataclasses.replace(settings, time_limit_s=budget_s))
         if any(v < 0 for v in tour.order):
             raise SettingsError.about(
                 "{solver} {value} places its own stops, which a fleet cannot share out: "
