@@ -404,6 +404,7 @@ def test_without_a_terminal_each_stage_prints_one_line_with_its_time(
         "moving the stops within what they see",
         "ordering the stops for sorties (up to 0.1 s)",
         "checking the missions",
+        "preparing the bound (compiled on first use)",
         "bounding the shortest possible flight (up to 0.2 s)",
         "reading a tour off the bound",
         "writing outputs",
