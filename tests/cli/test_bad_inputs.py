@@ -28,7 +28,7 @@ from click.testing import CliRunner
 from conftest import DEMO
 
 from urpt_gcs.cli import main
-from urpt_gcs.site.inputs import TARGETS_MAX_BYTES
+from urpt_gcs.site.inputs import SETTINGS_FILE_MAX_BYTES, TARGETS_MAX_BYTES
 
 BAD = Path(__file__).resolve().parents[1] / "data" / "bad"
 SITE = str(DEMO / "site.tif")
@@ -308,6 +308,20 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--vehicles 3", "2 vehicles of --fleet", "make them agree"],
     ),
     "fleet_vehicles_zero": (["--vehicles", "0"], ["--vehicles 0", "below 1"]),
+    # Refused before a vehicle is built: this count once took 2.26 GB and 31 s.
+    "fleet_vehicles_thirty_million": (
+        ["--vehicles", "30000000"],
+        ["--vehicles", "30000000 vehicles", "over the 16"],
+    ),
+    "fleet_fifo": (["--fleet", "%fleet_fifo.toml"], ["fleet_fifo.toml", "FIFO", "--fleet"]),
+    "fleet_link_to_dev_zero": (
+        ["--fleet", "%fleet_link_to_dev_zero.toml"],
+        ["fleet_link_to_dev_zero.toml", "character device", "--fleet"],
+    ),
+    "fleet_too_large": (
+        ["--fleet", "%fleet_too_large.toml"],
+        ["fleet_too_large.toml", "over the 4.0 MiB limit"],
+    ),
     "fleet_layers_over_max_agl": (
         ["--vehicles", "8"],
         ["layer 7 (vehicle 7)", "over --max-agl 120 m", "--layer-spacing"],
@@ -346,6 +360,9 @@ RUNTIME: dict[str, Callable[[Path], None]] = {
     "targets_link_to_dev_zero.kml": lambda p: p.symlink_to("/dev/zero"),
     "upload_link_to_dev_urandom.plan": lambda p: p.symlink_to("/dev/urandom"),
     "targets_too_large.kml": lambda p: _sparse(p, TARGETS_MAX_BYTES + 2**20),
+    "fleet_fifo.toml": os.mkfifo,
+    "fleet_link_to_dev_zero.toml": lambda p: p.symlink_to("/dev/zero"),
+    "fleet_too_large.toml": lambda p: _sparse(p, SETTINGS_FILE_MAX_BYTES + 1),
     "targets_100000.csv": _many_targets,
 }
 # What a child process running a case may spend.

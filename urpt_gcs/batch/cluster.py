@@ -48,6 +48,9 @@ LOCAL = "this process"
 # How long to wait for a scheduler to answer, and for it to have a worker.
 CONNECT_TIMEOUT_S = 10.0
 WORKERS_TIMEOUT_S = 30.0
+# A local cluster's processes per core: each holds a planner (a few hundred MB), and more
+# than a few per core only share the same cores.
+WORKERS_PER_CORE = 4
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,6 +104,12 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         )
     if workers is not None and workers < 1:
         raise SettingsError(f"--workers {workers} is below 1: give a number of processes")
+    most = WORKERS_PER_CORE * (os.cpu_count() or 1)
+    if workers is not None and workers > most:
+        raise SettingsError(
+            f"--workers {workers} is over {WORKERS_PER_CORE} per core ({most} on this "
+            f"computer): give at most {most}"
+        )
     # Dask loads only when a cluster is used (a lazy load, not a hidden cycle).
     from distributed import Client, LocalCluster
 

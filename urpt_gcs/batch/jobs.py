@@ -50,9 +50,10 @@ from urpt_gcs.errors import (
     memory_error_message,
     os_error_message,
 )
-from urpt_gcs.files.output import check_folder, commit
+from urpt_gcs.files.output import check_folder, commit, refuse_inputs
 from urpt_gcs.pipeline.options import KINDS, PLAN_OPTIONS, TOML_KEYS
 from urpt_gcs.pipeline.settings import PlanSettings, plan_settings
+from urpt_gcs.site.inputs import read_settings_text
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -178,16 +179,7 @@ def read_jobs(path: Path, out_dir: Path) -> list[Job]:
     JobsFileError
         One line naming the file, the table and the key at fault, and the fix.
     """
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise JobsFileError(f"jobs file '{path}' does not exist: check the path") from None
-    except IsADirectoryError:
-        raise JobsFileError(f"jobs file '{path}' is a folder: give a .toml file") from None
-    except UnicodeDecodeError:
-        raise JobsFileError(f"jobs file '{path}' is not UTF-8 text: save it as UTF-8") from None
-    except OSError as exc:
-        raise JobsFileError(f"jobs file '{path}' cannot be read: {exc.strerror or exc}") from None
+    text = read_settings_text(path, "jobs file", "urpt-gcs batch", JobsFileError)
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -423,8 +415,9 @@ def _missing(job: Job, path: str, who: str, fix: str) -> str:
     return f"[[site]] '{job.site}', {key} '{path}': {who} cannot read it: {fix}"
 
 
-def output_folders(jobs: Sequence[Job], out_dir: Path) -> None:
-    """Refuse, before any job runs, an output folder the batch cannot write.
+def output_folders(jobs: Sequence[Job], out_dir: Path, jobs_file: Path | None = None) -> None:
+    """Refuse, before any job runs, an output folder the batch cannot write, or one that
+    would replace an input (``jobs_file``, or a site's DEM or targets).
 
     Raises
     ------
@@ -434,9 +427,16 @@ def output_folders(jobs: Sequence[Job], out_dir: Path) -> None:
     # The products module loads the planner; the jobs file is read and checked without it.
     from urpt_gcs.files.products import check_out
 
-    check_folder(out_dir, "--out", names=[RESULTS_FILE])
+    destinations = [check_folder(out_dir, "--out", names=[RESULTS_FILE])]
+    destinations += [check_out(Path(job.out)) for job in jobs]
+    # No job may write over any job's inputs, nor the results over them.
+    inputs: dict[str, str | Path] = {}
+    if jobs_file is not None:
+        inputs["the jobs file"] = jobs_file
     for job in jobs:
-        check_out(Path(job.out))
+        inputs[f"[[site]] '{job.site}', dem"] = job.dem
+        inputs[f"[[site]] '{job.site}', targets"] = job.targets
+    refuse_inputs(destinations, inputs)
 
 
 # Called as each job ends: (jobs done, jobs in all, its row).

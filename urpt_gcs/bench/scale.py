@@ -52,6 +52,12 @@ EPSG = 32632
 WEST_M, NORTH_M = 500_000.0, 5_300_000.0
 RES_M = 0.3
 TILE_PX = 256
+# The raster's side: a footprint must fit 60 m inside the smallest; the largest is written
+# tile by tile but read whole by the planner, whose float32 copy must fit the memory.
+SCALE_MIN_SIZE_PX = 500
+SCALE_MAX_SIZE_PX = 30_000
+# The most targets of one site: ten times the largest the benchmark's goals name.
+SCALE_MAX_TARGETS = 100_000
 NODATA = -10000.0
 BASE_M = 400.0
 
@@ -151,6 +157,27 @@ def _tile(f: _Features, col0: int, row0: int, width: int, height: int) -> Any:
     return dsm.astype(np.float32)
 
 
+def check_scale(size_px: int, counts: list[int]) -> None:
+    """Refuse a raster side or target count the bench cannot make, before anything is made.
+
+    Raises
+    ------
+    SettingsError
+        Naming the option, its range and the fix.
+    """
+    if not SCALE_MIN_SIZE_PX <= size_px <= SCALE_MAX_SIZE_PX:
+        raise SettingsError(
+            f"--size {size_px} is outside {SCALE_MIN_SIZE_PX}..{SCALE_MAX_SIZE_PX} px "
+            f"(a {SCALE_MAX_SIZE_PX} px raster is {SCALE_MAX_SIZE_PX**2 * 4 / 2**30:.1f} GiB "
+            "of float32): give a side in that range"
+        )
+    for n in counts:
+        if not 1 <= n <= SCALE_MAX_TARGETS:
+            raise SettingsError(
+                f"--targets {n} is outside 1..{SCALE_MAX_TARGETS}: give a count in that range"
+            )
+
+
 def make_scale_site(
     out_dir: Path, size_px: int = 10_000, n_targets: int = 100, seed: int = 1
 ) -> ScaleSite:
@@ -179,10 +206,7 @@ def make_scale_site(
     OutputError
         When the folder cannot be written.
     """
-    if size_px < 500:
-        raise SettingsError(f"--size {size_px} is below 500 px: give a larger raster")
-    if n_targets < 1:
-        raise SettingsError(f"--targets {n_targets} is below 1: give at least one target")
+    check_scale(size_px, [n_targets])
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -358,6 +382,7 @@ def run_scale(
     list[ScaleRow]
         One row per target count.
     """
+    check_scale(size_px, list(targets))
     say = progress or (lambda _msg: None)
     rows = []
     for count in targets:

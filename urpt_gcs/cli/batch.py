@@ -69,7 +69,7 @@ def batch_command(
 
     jobs = read_jobs(jobs_file, out)
     # What can be refused here is refused before a cluster is started.
-    output_folders(jobs, out)
+    output_folders(jobs, out, jobs_file)
     check_inputs(jobs, None, remote=scheduler is not None)
     with open_client(scheduler, workers) as client:
         if not quiet:

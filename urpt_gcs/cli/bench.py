@@ -229,7 +229,7 @@ def bench_paper_command(
 @click.option(
     "--size",
     "size_px",
-    type=click.IntRange(min=500),
+    type=int,
     default=10_000,
     show_default=True,
     help="Side of the synthetic DSM in cells (0.3 m each).",

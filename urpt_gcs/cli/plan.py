@@ -6,7 +6,7 @@ import json
 import sys
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 
@@ -15,14 +15,19 @@ from urpt_gcs.cli.options import out_option, setting_options
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.pipeline.options import FLEET_OPTIONS, PLAN_OPTIONS, Option
 from urpt_gcs.pipeline.settings import (
+    FLEET_MAX_VEHICLES,
     FleetSettings,
     PlanSettings,
     VehicleSpec,
     plan_settings,
     read_fleet,
+    too_many_vehicles,
 )
 from urpt_gcs.progress import StageProgress
 from urpt_gcs.vehicle.protocol import DEFAULT_URL
+
+if TYPE_CHECKING:
+    from urpt_gcs.files.output import Destination
 
 __all__ = ["demo_site_command", "plan_command"]
 
@@ -97,6 +102,8 @@ def plan_command(
     **options: Any,
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
+    from urpt_gcs.files.fleet_output import check_fleet_out
+    from urpt_gcs.files.output import refuse_inputs
     from urpt_gcs.files.products import check_extra, check_out, write_products
     from urpt_gcs.files.report import summary_text
     from urpt_gcs.pipeline.planner import plan
@@ -120,10 +127,18 @@ def plan_command(
                 )
                 raise SettingsError(f"{flag} is not available for a fleet plan: {fix}")
     # Everything about the outputs that can be known now is checked before the planning.
-    destination = check_out(Path(out))
+    # No output may replace an input: compared as files, whatever their names.
+    inputs = {"--dem": dem, "--targets": targets}
+    if values["fleet"] is not None:
+        inputs["--fleet"] = values["fleet"]
+    if fleet is not None:
+        destinations = check_fleet_out(Path(out), len(fleet.vehicles))
+    else:
+        destinations = [check_out(Path(out))]
     export = None
     if export_gtsp is not None:
-        export = check_extra(export_gtsp, "--export-gtsp", destination)
+        export = check_extra(export_gtsp, "--export-gtsp", destinations[0])
+    refuse_inputs(destinations if export is None else [*destinations, export], inputs)
     values["altitude"] = None
     if altitude is not None and not auto:
         try:
@@ -140,9 +155,10 @@ def plan_command(
     stream = sys.stderr if live else sys.stdout
     if fleet is not None:
         _plan_fleet(
-            Path(dem), Path(targets), settings, fleet, Path(out), no_map, as_json, quiet, stream
+            Path(dem), Path(targets), settings, fleet, destinations, no_map, as_json, quiet, stream
         )
         return
+    destination = destinations[0]
     with StageProgress(stream, settings.solve.time_limit_s, live=live) as progress:
         say = None if quiet or as_json else progress
         if auto:
@@ -183,6 +199,9 @@ def _fleet(values: Mapping[str, Any]) -> FleetSettings | None:
     vehicles, fleet_file = values["vehicles"], values["fleet"]
     if vehicles < 1:
         raise SettingsError(f"--vehicles {vehicles} is below 1: give how many vehicles fly")
+    if vehicles > FLEET_MAX_VEHICLES:
+        # Before a vehicle is built: a count of millions would fill the memory first.
+        raise SettingsError(too_many_vehicles("--vehicles", vehicles))
     if fleet_file is None:
         if vehicles == 1:
             return None
@@ -210,20 +229,15 @@ def _plan_fleet(
     targets: Path,
     settings: PlanSettings,
     fleet: FleetSettings,
-    out: Path,
+    destinations: list[Destination],
     no_map: bool,
     as_json: bool,
     quiet: bool,
     stream: TextIO,
 ) -> None:
-    from urpt_gcs.files.fleet_output import (
-        check_fleet_out,
-        fleet_summary_text,
-        write_fleet_products,
-    )
+    from urpt_gcs.files.fleet_output import fleet_summary_text, write_fleet_products
     from urpt_gcs.pipeline.fleet import plan_fleet
 
-    destinations = check_fleet_out(out, len(fleet.vehicles))
     live = sys.stderr.isatty()
     with StageProgress(stream, settings.solve.time_limit_s, live=live) as progress:
         say = None if quiet or as_json else progress

@@ -39,7 +39,7 @@ from typing import Any
 
 from urpt_gcs.errors import OutputError
 
-__all__ = ["Destination", "check_file", "check_folder", "commit", "write_all"]
+__all__ = ["Destination", "check_file", "check_folder", "commit", "refuse_inputs", "write_all"]
 
 NEW_PREFIX = ".urpt-new-"
 OLD_PREFIX = ".urpt-old-"
@@ -62,15 +62,81 @@ class Destination:
     owns
         Names of files an earlier set left here that a new set replaces, whether it writes
         them again or not; None: only the names written again are replaced.
+    names
+        File names known, when it was checked, to be written here.
     """
 
     folder: Path
     flag: str = "--out"
     owns: re.Pattern[str] | None = None
+    names: tuple[str, ...] = ()
 
     def owned(self, name: str) -> bool:
         """Whether ``name`` in this folder belongs to the set a commit replaces."""
         return self.owns is not None and self.owns.fullmatch(name) is not None
+
+    def replaced(self) -> list[Path]:
+        """The files now here that a commit would replace or remove: every name known to be
+        written and every name the folder owns."""
+        if not os.path.isdir(self.folder):
+            return []
+        with os.scandir(self.folder) as entries:
+            owned = [e.name for e in entries if self.owned(e.name)]
+        names = dict.fromkeys([*self.names, *owned])
+        return [self.folder / n for n in names if os.path.lexists(self.folder / n)]
+
+
+def refuse_inputs(destinations: Sequence[Destination], inputs: Mapping[str, Path | str]) -> None:
+    """Refuse, before any work, an output that would replace or remove one of the inputs.
+
+    Files are compared as files (device and inode), not by name, so that a hard link, a link
+    to the input's folder, ``..`` or a relative spelling of an input is caught as surely as
+    its own name. A link among the outputs that points to an input is not refused: the commit
+    replaces the link, and the input is untouched.
+
+    Parameters
+    ----------
+    destinations
+        Every checked destination the work will commit to.
+    inputs
+        What names each input (``--dem``, ``[[site]] 'quarry', targets``) -> its path.
+
+    Raises
+    ------
+    OutputError
+        One line naming the output, the input it would replace, and the fix.
+    """
+    # A commit replaces names, never writes through them: what an output endangers is the
+    # entry it replaces (not what a link there points to), and an input read through a link
+    # is lost with the file the link names or with the link itself.
+    known: dict[tuple[int, int], tuple[str, str]] = {}
+    for who, path in inputs.items():
+        for look in (os.stat, os.lstat):
+            try:
+                st = look(path)
+            except (OSError, ValueError):
+                continue  # the input's own check names it
+            known.setdefault((st.st_dev, st.st_ino), (who, os.fspath(path)))
+    for dest in destinations:
+        for out in dest.replaced():
+            try:
+                st = os.lstat(out)
+            except (OSError, ValueError):
+                continue
+            hit = known.get((st.st_dev, st.st_ino))
+            if hit is None:
+                continue
+            who, path = hit
+            if dest.owns is None and dest.names == (out.name,):
+                raise OutputError(
+                    f"{dest.flag} '{out}' is the file of {who} ('{path}'), which writing it "
+                    f"would destroy: choose another {dest.flag}"
+                )
+            raise OutputError(
+                f"{dest.flag} '{dest.folder}' holds {who} ('{path}') as '{out.name}', which "
+                f"is replaced by an output of the same name: move the input or choose "
+                f"another {dest.flag}"
+            )
 
 
 def check_folder(
@@ -103,7 +169,7 @@ def check_folder(
         One line naming the path, what is wrong and what to do.
     """
     _check(folder, flag, str(folder), owns, names)
-    return Destination(folder, flag, owns)
+    return Destination(folder, flag, owns, tuple(names))
 
 
 def check_file(path: Path, flag: str) -> Destination:
@@ -129,7 +195,7 @@ def check_file(path: Path, flag: str) -> Destination:
     if path.name in ("", ".", ".."):
         raise _refused(flag, str(path), "names a folder, not a file")
     _check(path.parent, flag, str(path), None, [path.name])
-    return Destination(path.parent, flag)
+    return Destination(path.parent, flag, names=(path.name,))
 
 
 def commit(writes: Sequence[tuple[Destination, Mapping[str, Content]]]) -> list[Path]:

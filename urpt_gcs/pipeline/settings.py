@@ -20,6 +20,7 @@ from urpt_gcs.flight.band import FlightBand, parse_band
 from urpt_gcs.flight.mission import MissionSettings
 from urpt_gcs.pipeline.options import DEFAULTS, PLAN_OPTIONS, VEHICLE_KEYS
 from urpt_gcs.site.camera import Frame, frame_from_flags
+from urpt_gcs.site.inputs import read_settings_text
 from urpt_gcs.site.position import parse_latlon
 from urpt_gcs.solvers import SOLVER_CHOICES, SolveSettings
 from urpt_gcs.visibility.regions import Camera
@@ -30,6 +31,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 __all__ = [
+    "FLEET_MAX_VEHICLES",
     "SEPARATION_MODES",
     "FleetSettings",
     "PlanSettings",
@@ -38,6 +40,10 @@ __all__ = [
     "plan_settings",
     "read_fleet",
 ]
+
+# The most vehicles one fleet plan shares the targets among: the split's search and the
+# separation's pairwise checks grow with the square of the count.
+FLEET_MAX_VEHICLES = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,11 +223,8 @@ class FleetSettings:
     def __post_init__(self) -> None:
         if not self.vehicles:
             raise SettingsError(f"{self.source} has no vehicle: give at least one")
-        if len(self.vehicles) > 16:
-            raise SettingsError(
-                f"{self.source}: {len(self.vehicles)} vehicles, over the 16 a fleet may have: "
-                "plan fewer at a time"
-            )
+        if len(self.vehicles) > FLEET_MAX_VEHICLES:
+            raise SettingsError(too_many_vehicles(self.source, len(self.vehicles)))
         if self.separation not in SEPARATION_MODES:
             raise SettingsError.about(
                 "{separation} {value!r} is not known: use altitude or time", value=self.separation
@@ -295,6 +298,14 @@ def plan_settings(values: Mapping[str, Any]) -> PlanSettings:
     )
 
 
+def too_many_vehicles(source: str, count: int) -> str:
+    """The message refusing a fleet of ``count`` vehicles, over :data:`FLEET_MAX_VEHICLES`."""
+    return (
+        f"{source}: {count} vehicles, over the {FLEET_MAX_VEHICLES} a fleet may have: "
+        "plan fewer at a time"
+    )
+
+
 def read_fleet(path: Path | str) -> tuple[VehicleSpec, ...]:
     """The vehicles of a fleet file: one ``[[vehicle]]`` table each, with any of
     ``home_lat``/``home_lon`` (together), ``speed_m_s``, ``endurance_min``, ``altitude_m``.
@@ -306,24 +317,7 @@ def read_fleet(path: Path | str) -> tuple[VehicleSpec, ...]:
         the fix.
     """
     path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise SettingsError.about(
-            "{fleet_file} '{path}' does not exist: check the path", path=path
-        ) from None
-    except IsADirectoryError:
-        raise SettingsError.about(
-            "{fleet_file} '{path}' is a folder: give a .toml file", path=path
-        ) from None
-    except UnicodeDecodeError:
-        raise SettingsError.about(
-            "{fleet_file} '{path}' is not UTF-8 text: save it as UTF-8", path=path
-        ) from None
-    except OSError as exc:
-        raise SettingsError.about(
-            "{fleet_file} '{path}' cannot be read: {why}", path=path, why=exc.strerror or exc
-        ) from None
+    text = read_settings_text(path, "fleet file", "--fleet", SettingsError)
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

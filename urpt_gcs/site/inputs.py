@@ -23,8 +23,10 @@ from urpt_gcs.errors import UrptError
 __all__ = [
     "GTSPLIB_MAX_BYTES",
     "MISSION_FILE_MAX_BYTES",
+    "SETTINGS_FILE_MAX_BYTES",
     "TARGETS_MAX_BYTES",
     "read_capped",
+    "read_settings_text",
     "require_regular_file",
     "shown_path",
 ]
@@ -33,6 +35,8 @@ __all__ = [
 TARGETS_MAX_BYTES = 64 * 2**20
 MISSION_FILE_MAX_BYTES = 16 * 2**20
 GTSPLIB_MAX_BYTES = 64 * 2**20
+# A fleet file or a batch's jobs file: a few hundred vehicles or sites fit in far less.
+SETTINGS_FILE_MAX_BYTES = 4 * 2**20
 
 # The longest file name most file systems take (NAME_MAX).
 _NAME_MAX = 255
@@ -156,6 +160,25 @@ def read_capped(
     if len(data) > cap_bytes:
         raise error(_over_cap(name, len(data), cap_bytes, fix, grew=True))
     return data
+
+
+def read_settings_text(path: Path, what: str, flag: str, error: type[UrptError]) -> str:
+    """The text of a TOML settings file (a fleet file, a jobs file), read as
+    :func:`read_capped` reads, at most :data:`SETTINGS_FILE_MAX_BYTES`; a UTF-8 byte-order
+    mark, which some editors write, is dropped.
+
+    Raises
+    ------
+    UrptError
+        Of class ``error``: everything :func:`read_capped` refuses, or text that is not UTF-8.
+    """
+    data = read_capped(
+        path, what, flag, error, SETTINGS_FILE_MAX_BYTES, f"check the path given to {flag}"
+    )
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise error(f"{what} {shown_path(path)} is not UTF-8 text: save it as UTF-8") from None
 
 
 def _over_cap(name: str, size: int, cap_bytes: int, fix: str, grew: bool = False) -> str:
