@@ -87,3 +87,51 @@ def test_bench_scale_refuses_a_size_or_count_it_cannot_make(
     code, stderr = run_cli(["bench", "scale", *args, "--out", str(out)], in_child=True)
     _one_line(code, stderr, words)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("bench", "runner"),
+    [
+        (["paper", "--quick"], "urpt_gcs.bench.paper.run_paper"),
+        (["cetsp", "{tmp}"], "urpt_gcs.bench.cetsp.run_cetsp"),
+        (["gtsplib", "{tmp}"], "urpt_gcs.bench.gtsplib.run_gtsplib"),
+        (["scale", "--targets", "5"], "urpt_gcs.bench.scale.run_scale"),
+    ],
+)
+def test_a_bench_refuses_an_out_that_is_a_file_before_it_runs(
+    bench: list[str], runner: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def ran(*args: object, **kwargs: object) -> None:
+        pytest.fail(f"{runner} ran before --out was checked")
+
+    monkeypatch.setattr(runner, ran)
+    out = tmp_path / "results_here"
+    out.write_text("the operator's file\n")
+    args = ["bench", *(a.replace("{tmp}", str(tmp_path)) for a in bench), "--out", str(out)]
+    code, stderr = run_cli(args, in_child=False)
+    _one_line(code, stderr, [f"--out '{out}'", "is a file, not a folder"])
+    assert out.read_text() == "the operator's file\n"
+
+
+@pytest.mark.parametrize(
+    ("args", "flag"),
+    [
+        (["bench", "paper", "--quick", "--heuristic-time", "nan"], "--heuristic-time"),
+        (["bench", "paper", "--quick", "--heuristic-time", "-1"], "--heuristic-time"),
+        (["bench", "paper", "--quick", "--bound-time", "inf"], "--bound-time"),
+        (["upload", "plan.plan", "--timeout", "nan"], "--timeout"),
+        (["sitl", "--loss", "nan"], "--loss"),
+        (["sitl", "--loss", "1.5"], "--loss"),
+    ],
+)
+def test_a_number_that_is_not_finite_or_in_range_is_a_usage_error_naming_its_flag(
+    args: list[str], flag: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Before, NaN passed and was refused after the study, named as --time-limit.
+    monkeypatch.setattr(
+        "urpt_gcs.bench.paper.run_paper", lambda *a, **k: pytest.fail("the bench ran")
+    )
+    code, stderr = run_cli(args, in_child=False)
+    assert code == 2, stderr
+    assert f"Invalid value for '{flag}'" in stderr
+    assert "Traceback" not in stderr

@@ -130,6 +130,11 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
     "altitude_under_terrain": (["@altitude_under_terrain.args"], ["--altitude", "terrain"]),
     "fov_zero": (["@fov_zero.args"], ["--fov", "(0, 90)"]),
     "fov_90": (["@fov_90.args"], ["--fov", "(0, 90)"]),
+    # A cone of metres was once printed as "1.3e+03 cm".
+    "cone_narrower_than_the_tolerance": (
+        ["--position-tolerance", "20", "--fov", "20"],
+        ["--fov 20 sees only 12.90 m around", "--position-tolerance"],
+    ),
     "samples_2": (["@samples_2.args"], ["--samples", "at least 3"]),
     "output_folder_is_a_file": (
         ["--out", str(BAD / "output_folder_is_a_file")],
@@ -307,7 +312,25 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--fleet", str(BAD / "fleet_home_off_dem.toml"), "--vehicles", "3"],
         ["--vehicles 3", "2 vehicles of --fleet", "make them agree"],
     ),
+    # Refused before the plan: it was once refused after replacing the earlier --out.
+    "upload_connect_unknown": (
+        ["--upload", "--connect", "foo://bad"],
+        ["--connect 'foo://bad'", "unknown kind of link", "udpin://"],
+    ),
+    "upload_connect_port_out_of_range": (
+        ["--upload", "--connect", "udpin://0.0.0.0:99999"],
+        ["--connect 'udpin://0.0.0.0:99999'", "port from 1 to 65535"],
+    ),
+    "home_off_dem": (
+        ["--home", "47.70,9.43"],
+        ["home (--home)", "outside DEM", "move it onto the DEM"],
+    ),
     "fleet_vehicles_zero": (["--vehicles", "0"], ["--vehicles 0", "below 1"]),
+    # The vehicle's own altitude is named where it was set, not as --altitude.
+    "fleet_altitude_under_terrain": (
+        ["--fleet", str(BAD / "fleet_altitude_under_terrain.toml")],
+        ["[[vehicle]] 1 altitude_m (--fleet", "fleet_altitude_under_terrain.toml", "420 m"],
+    ),
     # Refused before a vehicle is built: this count once took 2.26 GB and 31 s.
     "fleet_vehicles_thirty_million": (
         ["--vehicles", "30000000"],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from pathlib import Path
 
@@ -17,7 +18,14 @@ from rasterio.windows import Window
 from urpt_gcs.errors import DemError
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
-from urpt_gcs.site.dem import check_elevations, open_dem, planning_crs, scale_error, vertical_unit
+from urpt_gcs.site.dem import (
+    check_elevations,
+    crs_label,
+    open_dem,
+    planning_crs,
+    scale_error,
+    vertical_unit,
+)
 from urpt_gcs.site.reading import read_terrain
 from urpt_gcs.solvers import SolveSettings
 
@@ -317,6 +325,47 @@ def test_web_mercator_dem_across_utm_zones_is_refused(write_dem: WriteDem) -> No
     info = open_dem(_web_mercator_dem(write_dem, 5.999, 47.7))
     with pytest.raises(DemError, match=r"Pseudo-Mercator, whose scale at the site is off by 4"):
         planning_crs(info, (5.999, 47.699, 6.001, 47.7))
+
+
+@pytest.mark.parametrize(
+    ("bounds", "zones"),
+    [
+        ((5.999, 47.699, 6.001, 47.7), "UTM zones 31N and 32N"),
+        ((-179.999, 47.699, 179.999, 47.7), "the antimeridian (UTM zones 60N and 1N)"),
+    ],
+)
+def test_points_across_zones_are_refused_naming_their_own_zones(
+    write_dem: WriteDem, bounds: tuple[float, float, float, float], zones: str
+) -> None:
+    info = open_dem(_web_mercator_dem(write_dem, 5.999, 47.7))
+    with pytest.raises(DemError, match=re.escape(f"straddle {zones}:")):
+        planning_crs(info, bounds)
+
+
+def _renamed(code: str, name: str) -> pyproj.CRS:
+    """A CRS of its own name and no authority code, as a surveyor's site grid."""
+    document = pyproj.CRS(code).to_json_dict()
+    document["name"] = name
+    document.pop("id")
+    return pyproj.CRS.from_json_dict(document)
+
+
+@pytest.mark.parametrize(
+    ("crs", "label"),
+    [
+        ("EPSG:32632", "EPSG:32632"),
+        (
+            "+proj=tmerc +lat_0=47 +lon_0=9.4 +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m",
+            "a custom Transverse Mercator CRS",
+        ),
+        ("+proj=longlat +ellps=GRS80", "a custom geographic CRS"),
+        (_renamed("EPSG:2056", "Site grid"), "Site grid"),
+    ],
+)
+def test_a_crs_is_named_in_one_short_line_never_as_its_wkt(
+    crs: str | pyproj.CRS, label: str
+) -> None:
+    assert crs_label(pyproj.CRS(crs)) == label
 
 
 def test_state_plane_feet_dem_is_georeferenced_in_utm(write_dem: WriteDem) -> None:

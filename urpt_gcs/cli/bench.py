@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import click
 
 from urpt_gcs.cli._root import main, terminal_progress
-from urpt_gcs.cli.options import out_option
+from urpt_gcs.cli.options import NON_NEGATIVE, POSITIVE, out_option
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -35,7 +35,7 @@ def bench_group() -> None:
 @click.argument("directory", type=click.Path(path_type=Path))
 @click.option(
     "--time-limit",
-    type=float,
+    type=POSITIVE,
     default=None,
     help="Seconds per solve [default: 3x GLNS's published mean time, else 10].",
 )
@@ -59,6 +59,8 @@ def bench_gtsplib_command(
     """Solve GTSPLIB files in DIRECTORY; compare with best_known.csv and glns_default.csv."""
     from urpt_gcs.bench.gtsplib import format_table, run_gtsplib
 
+    results_out(out)
+
     def names(text: str | None) -> list[str]:
         return [part.strip() for part in (text or "").split(",") if part.strip()]
 
@@ -72,6 +74,15 @@ def bench_gtsplib_command(
         progress=terminal_progress(),
     )
     click.echo(format_table(rows))
+
+
+def results_out(out: Path | None) -> None:
+    """Refuse an ``--out`` that ``results.csv`` cannot be written to, before the bench runs
+    (a bench can take hours)."""
+    if out is not None:
+        from urpt_gcs.files.output import check_folder
+
+        check_folder(out, "--out", names=["results.csv"])
 
 
 def cluster_options(command: Callable[..., None]) -> Callable[..., None]:
@@ -108,7 +119,7 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
 @bench_group.command("cetsp")
 @click.argument("directory", type=click.Path(path_type=Path))
 @click.option(
-    "--time-limit", type=float, default=60.0, show_default=True, help="Seconds per instance."
+    "--time-limit", type=POSITIVE, default=60.0, show_default=True, help="Seconds per instance."
 )
 @click.option("--only", default=None, metavar="NAME[,NAME]", help="Run only these instances.")
 @click.option(
@@ -148,6 +159,8 @@ def bench_cetsp_command(
     """Solve and bound the CETSP instances in DIRECTORY (laid out like bench/cetsp)."""
     from urpt_gcs.bench.cetsp import format_table, run_cetsp
 
+    results_out(out)
+
     names = [part.strip() for part in (only or "").split(",") if part.strip()]
     with bench_client(scheduler, workers) as client:
         rows = run_cetsp(
@@ -170,14 +183,14 @@ def bench_cetsp_command(
 @out_option("Folder for results.csv.")
 @click.option(
     "--heuristic-time",
-    type=float,
+    type=POSITIVE,
     default=1.0,
     show_default=True,
     help="Seconds the heuristic gets per instance.",
 )
 @click.option(
     "--bound-time",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=POSITIVE,
     default=10.0,  # urpt_gcs.bench.paper.BOUND_S (not imported here: the CLI starts light)
     show_default=True,
     help="Seconds the certified lower bound gets per instance (it stops sooner where it "
@@ -185,7 +198,7 @@ def bench_cetsp_command(
 )
 @click.option(
     "--bound-gap",
-    type=click.FloatRange(min=0.0),
+    type=NON_NEGATIVE,
     default=0.1,  # urpt_gcs.bench.paper.BOUND_GAP, in percent
     show_default=True,
     help="Percent: the bound's stars are walked finer only while the tour is more than "
@@ -203,6 +216,8 @@ def bench_paper_command(
 ) -> None:
     """Reproduce the paper's simulation study: 540 instances on random TIN terrains."""
     from urpt_gcs.bench.paper import format_tables, run_paper
+
+    results_out(out)
 
     with bench_client(scheduler, workers) as client:
         rows = run_paper(
@@ -239,6 +254,8 @@ def bench_paper_command(
 def bench_scale_command(targets: str, size_px: int, seed: int, out: Path | None) -> None:
     """Plan synthetic Pix4D-like sites: per-stage wall time, peak RSS, visibility/read ratio."""
     from urpt_gcs.bench.scale import format_table, run_scale
+
+    results_out(out)
 
     try:
         counts = [int(part) for part in targets.split(",") if part.strip()]

@@ -7,6 +7,7 @@ with the same default and help. :func:`out_option` is the ``--out`` of every com
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -29,6 +30,23 @@ _TYPES: dict[str, Any] = {
 }
 # A choice's metavar in --help: the help text lists the values.
 _CHOICE_METAVAR = "TEXT"
+
+
+class Finite(click.FloatRange):
+    """A number of a command's own (seconds, a rate), finite and within the range: click's
+    range lets ``nan`` through, which then fails late under another name."""
+
+    name = "number"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return number
+
+
+POSITIVE = Finite(min=0.0, min_open=True)
+NON_NEGATIVE = Finite(min=0.0)
 
 
 class SettingChoice(click.Choice[str]):

@@ -24,7 +24,7 @@ from urpt_gcs.pipeline.settings import (
     too_many_vehicles,
 )
 from urpt_gcs.progress import StageProgress
-from urpt_gcs.vehicle.protocol import DEFAULT_URL
+from urpt_gcs.vehicle.protocol import DEFAULT_URL, check_url
 
 if TYPE_CHECKING:
     from urpt_gcs.files.output import Destination
@@ -127,6 +127,8 @@ def plan_command(
                 )
                 raise SettingsError(f"{flag} is not available for a fleet plan: {fix}")
     # Everything about the outputs that can be known now is checked before the planning.
+    if do_upload:
+        check_url(connect)
     # No output may replace an input: compared as files, whatever their names.
     inputs = {"--dem": dem, "--targets": targets}
     if values["fleet"] is not None:

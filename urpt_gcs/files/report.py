@@ -18,6 +18,7 @@ from urpt_gcs.files.band_report import (
 )
 from urpt_gcs.flight.mission import photo_headings, photo_positions
 from urpt_gcs.pipeline.result import Plan
+from urpt_gcs.site.dem import crs_label
 
 
 def _round(x: float, digits: int = 2) -> float | None:
@@ -190,7 +191,8 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
             "cell_m": round(plan.terrain.cell_m, 4),
             "read_window_px": list(plan.terrain.read_window_px),
             "source_shape_px": list(plan.terrain.source_shape_px),
-            "source_crs": plan.dem.crs.name,
+            "crs_name": crs_label(plan.crs),
+            "source_crs": crs_label(plan.dem.crs),
             "band": plan.dem.band,
             "vertical_unit": plan.dem.vertical_unit.name,
             "vertical_unit_to_m": plan.dem.vertical_unit.to_m,
@@ -395,7 +397,7 @@ def _dem_line(dem: dict[str, Any]) -> str:
         heights = f"DEM heights in {named}, converted to metres"
     else:
         heights = "DEM heights in metres"
-    where = f"planned in {dem['crs']}"
+    where = f"planned in {dem.get('crs_name', dem['crs'])}"
     if not dem["planned_in_source_crs"]:
         where += f" (the DEM is in {dem['source_crs']})"
     return f"dem            {heights}; band {dem['band']}; {where}"

@@ -131,9 +131,13 @@ def check_ground(
     col, row = ~info.transform @ (sx, sy)
     where = f"{names[i]} ({lat:.7f}, {lon:.7f})"
     if not (0 <= col <= info.width_px and 0 <= row <= info.height_px):
+        fix = (
+            "move it onto the DEM"
+            if names[i].startswith("home")
+            else "remove it from the target file"
+        )
         raise TargetsError(
-            f"{where} lies outside DEM '{info.path}': remove it from the target file or use a "
-            "DEM that covers it"
+            f"{where} lies outside DEM '{info.path}': {fix} or use a DEM that covers it"
         )
     raise TargetsError(
         f"{where} is on a nodata cell of DEM '{info.path}': move it onto surveyed ground"
@@ -250,18 +254,18 @@ def check_cone_width(
         return
     if camera.frame is not None:
         raise SettingsError.about(
-            "the frame camera sees only {seen:.2g} cm around target '{name}' (its short side, "
+            "the frame camera sees only {seen} around target '{name}' (its short side, "
             "within any {gsd_cm} distance), under the {least:g} m a stop needs (twice "
             "{position_tolerance_m}): raise {altitude_m} or {clearance_m}, ask for a coarser "
             "{gsd_cm}, or lower {position_tolerance_m}",
-            seen=cone[i] * 100,
+            seen=_length(float(cone[i])),
             name=names[i],
             least=least,
         )
     height = camera.altitude_m - float(ground_m[i])
     need = math.ceil(math.degrees(math.atan(least / height)) * 1000) / 1000
-    seen = "{fov_deg} {fov:g} sees only {seen:.2g} cm around target '{name}'"
-    at = {"fov": camera.fov_deg, "seen": cone[i] * 100, "name": names[i], "need": need}
+    seen = "{fov_deg} {fov:g} sees only {seen} around target '{name}'"
+    at = {"fov": camera.fov_deg, "seen": _length(float(cone[i])), "name": names[i], "need": need}
     if least > MIN_CONE_RADIUS_M:
         raise SettingsError.about(
             seen + ", under twice the {tolerance:g} m the vehicle may stop off its waypoint "
@@ -285,3 +289,8 @@ __all__ = [
     "check_swapped",
     "require_window",
 ]
+
+
+def _length(metres: float) -> str:
+    """A short length for a message: centimetres below a metre, else metres."""
+    return f"{metres * 100:.1f} cm" if metres < 1.0 else f"{metres:.2f} m"

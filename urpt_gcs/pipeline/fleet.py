@@ -17,8 +17,10 @@ delay and the planned closest approach.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -370,6 +372,20 @@ def _makespan_bound(
     return makespan_bound(vehicles, single, certificate.sorties if one_home else None)
 
 
+@contextlib.contextmanager
+def _own_altitude_named(fleet: FleetSettings, k: int) -> Iterator[None]:
+    """Name a vehicle's own ``altitude_m`` in its fleet file where an error about vehicle
+    ``k`` (from 0) names the plan's altitude: the operator set it there, not by the flag."""
+    try:
+        yield
+    except SettingsError as exc:
+        if fleet.vehicles[k].altitude_m is None or exc.template is None:
+            raise
+        source = fleet.source.replace("{", "{{").replace("}", "}}")
+        own = f"[[vehicle]] {k + 1} altitude_m ({source})"
+        raise SettingsError.about(exc.template.replace("{altitude_m}", own), **exc.values) from None
+
+
 def _vehicle_settings(
     settings: PlanSettings, spec: VehicleSpec, altitude_m: float | None
 ) -> PlanSettings:
@@ -420,7 +436,8 @@ def _layers(
     stages.say("reading terrain")
     given = specs[0].altitude_m if specs[0].altitude_m is not None else settings.altitude_m
     first = _vehicle_settings(settings, specs[0], given)
-    base = read_area(_vehicle_site(site, first, 1, fleet), first).camera.altitude_m
+    with _own_altitude_named(fleet, 0):
+        base = read_area(_vehicle_site(site, first, 1, fleet), first).camera.altitude_m
 
     def wanted(k: int, base_m: float) -> float:
         given = specs[k].altitude_m
@@ -431,7 +448,10 @@ def _layers(
         for k, spec in enumerate(specs):
             s = _vehicle_settings(settings, spec, wanted(k, base))
             areas.append((s, _vehicle_site(site, s, k + 1, fleet)))
-        read = [(s, v, read_area(v, s)) for s, v in areas]
+        read = []
+        for k, (s, v) in enumerate(areas):
+            with _own_altitude_named(fleet, k):
+                read.append((s, v, read_area(v, s)))
         if settings.altitude_m is not None:
             break
         # The first layer each layer planned from --clearance asks for over its own window.
@@ -445,7 +465,8 @@ def _layers(
         base = max(need)
     stages.lap("terrain")
     for k, (s, _, a) in enumerate(read):
-        _check_layer(k + 1, s, a, settings, fleet)
+        with _own_altitude_named(fleet, k):
+            _check_layer(k + 1, s, a, settings, fleet)
     out: list[VehicleLayer] = []
     for k, (s, v, a) in enumerate(read):
         stages.say(f"visibility of {len(site.names)} targets for vehicle {k + 1}")

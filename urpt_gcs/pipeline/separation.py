@@ -383,7 +383,8 @@ def _delays(
                     "vehicles {a} and {b} come within {distance:.1f} m{what} of each other at "
                     "{at:.0f} s after take-off near {lat:.6f}, {lon:.6f}, under the {least:g} m "
                     "required, and no start delay up to {cap:.0f} s avoids it: give the "
-                    "vehicles homes further apart in {fleet_file}, or use {separation} altitude",
+                    "vehicles homes further apart in {fleet_file}, or "
+                    + ("use {separation} altitude" if horizontal else "raise {layer_spacing_m}"),
                     a=first.vehicles[0],
                     b=first.vehicles[1],
                     distance=_value(first, horizontal),

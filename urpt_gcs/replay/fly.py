@@ -396,7 +396,7 @@ async def fly_connected(
         await asyncio.wait_for(watch.disarmed.wait(), timeout_s)
     except asyncio.TimeoutError:
         raise LinkError(
-            f"{vehicle.describe()} did not land within {timeout_s:.0f} s of wall time"
+            f"{vehicle.describe()} did not land within {timeout_s:g} s of wall time"
             + ardupilot_sitl.unreachable_hint(mission)
         ) from None
     except MavsdkError as exc:

@@ -48,6 +48,7 @@ __all__ = [
     "VerticalUnit",
     "check_elevations",
     "clean_elevations",
+    "crs_label",
     "first_line",
     "open_dem",
     "open_raster",
@@ -334,12 +335,37 @@ def planning_crs(info: DemInfo, lon_lat_bounds: tuple[float, float, float, float
             "reproject it to a local metric CRS first"
         )
     if len(zones) > 1:
-        names = " and ".join(z.name.rsplit(" ", 1)[-1] for z in zones[:2])
+        # Named by the points' own zones: the query lists every zone between them, from 1.
+        if east - west > 180.0:
+            where = f"the antimeridian (UTM zones {_utm_zone(east)}{hemisphere} and 1{hemisphere})"
+        else:
+            where = f"UTM zones {_utm_zone(west)}{hemisphere} and {_utm_zone(east)}{hemisphere}"
         raise DemError(
-            f"DEM '{info.path}' {reason} and the targets straddle UTM zones {names}: "
+            f"DEM '{info.path}' {reason} and the targets straddle {where}: "
             "plan each side separately, or reproject the DEM to one projected CRS (gdalwarp)"
         )
     return pyproj.CRS.from_authority(zones[0].auth_name, zones[0].code)
+
+
+def crs_label(crs: pyproj.CRS) -> str:
+    """A CRS as a person names it, in one short line: its authority code (``EPSG:32632``) when
+    it has one, else its name, else what kind of CRS it is (``a custom Transverse Mercator
+    CRS``); never its WKT."""
+    code = crs.to_authority(min_confidence=90)
+    if code is not None:
+        return f"{code[0]}:{code[1]}"
+    name = " ".join((crs.name or "").split())
+    if name and name.lower() not in ("unknown", "unnamed", "undefined"):
+        return name if len(name) <= 80 else name[:77] + "..."
+    operation = crs.coordinate_operation
+    if crs.is_projected and operation is not None and operation.method_name:
+        return f"a custom {operation.method_name} CRS"
+    return "a custom geographic CRS" if crs.is_geographic else "a custom CRS"
+
+
+def _utm_zone(lon: float) -> int:
+    """The number (1..60) of the UTM zone holding longitude ``lon``."""
+    return int((lon + 180.0) // 6.0) % 60 + 1
 
 
 def clean_elevations(

@@ -39,6 +39,7 @@ from urpt_gcs.flight.geofence import FENCE_TYPE
 from urpt_gcs.flight.wire import WireItem
 from urpt_gcs.vehicle.protocol import (
     DEFAULT_URL,
+    URL_EXAMPLES,
     AutopilotKind,
     FenceRefused,
     LinkTimeout,
@@ -360,10 +361,7 @@ async def connect(url: str = DEFAULT_URL, timeout_s: float = 10.0) -> AsyncItera
         try:
             await sdk.add_any_connection(url)
         except MavsdkError as exc:
-            raise LinkError(
-                f"cannot open {url!r} ({exc}): use e.g. udpin://0.0.0.0:14550, "
-                "tcpout://127.0.0.1:5760 or serial:///dev/ttyACM0:57600"
-            ) from None
+            raise LinkError(f"cannot open {url!r} ({exc}): use e.g. {URL_EXAMPLES}") from None
         system = await sdk.first_autopilot(timeout_s=timeout_s)
         if system is None:
             raise LinkError(
@@ -399,10 +397,7 @@ async def connect_systems(
         try:
             await sdk.add_any_connection(url)
         except MavsdkError as exc:
-            raise LinkError(
-                f"cannot open {url!r} ({exc}): use e.g. udpin://0.0.0.0:14550, "
-                "tcpout://127.0.0.1:5760 or serial:///dev/ttyACM0:57600"
-            ) from None
+            raise LinkError(f"cannot open {url!r} ({exc}): use e.g. {URL_EXAMPLES}") from None
         wanted = set(system_ids)
         found: dict[int, Any] = {}
         deadline = time.monotonic() + timeout_s

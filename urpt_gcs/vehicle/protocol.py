@@ -25,10 +25,41 @@ __all__ = [
     "MissionRejected",
     "UploadUnconfirmed",
     "VehicleLink",
+    "check_url",
 ]
 
 DEFAULT_URL = "udpin://0.0.0.0:14550"
+URL_EXAMPLES = "udpin://0.0.0.0:14550, tcpout://127.0.0.1:5760 or serial:///dev/ttyACM0:57600"
+# The connection schemes MAVSDK 4.x opens, and which of them name a network port.
+_NETWORK_SCHEMES = ("udpin", "udpout", "tcpin", "tcpout", "udp", "tcp")
+_SERIAL_SCHEMES = ("serial", "serial_flowcontrol")
 AutopilotKind = Literal["ardupilot", "px4", "unknown"]
+
+
+def check_url(url: str) -> None:
+    """Refuse a connection string MAVSDK cannot open, before any work that ends in it.
+
+    Raises
+    ------
+    LinkError
+        One line naming the string, what is wrong and examples that work.
+    """
+    scheme, sep, rest = url.partition("://")
+    problem = None
+    if not sep or scheme not in (*_NETWORK_SCHEMES, *_SERIAL_SCHEMES):
+        problem = "an unknown kind of link"
+    elif scheme in _NETWORK_SCHEMES:
+        _, colon, port = rest.rpartition(":")
+        if not colon or not port.isdigit() or not 1 <= int(port) <= 65535:
+            problem = "not HOST:PORT with a port from 1 to 65535"
+    else:
+        device, colon, baud = rest.rpartition(":")
+        if not colon:
+            device, baud = rest, "1"
+        if not device.startswith("/") or not baud.isdigit() or int(baud) < 1:
+            problem = "not a device path and a baud rate (/dev/ttyACM0:57600)"
+    if problem is not None:
+        raise LinkError(f"--connect {url!r} is {problem}: use e.g. {URL_EXAMPLES}")
 
 
 class MissionRejected(LinkError):
