@@ -182,6 +182,14 @@ def test_a_bad_jobs_file_is_refused_naming_file_table_and_key(
     assert "\n" not in message
 
 
+def test_a_jobs_file_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
+    # As Notepad saves UTF-8: the mark is no TOML statement.
+    jobs_file = tmp_path / "jobs.toml"
+    jobs_file.write_bytes(b"\xef\xbb\xbf" + SITE.encode())
+    (job,) = read_jobs(jobs_file, tmp_path / "out")
+    assert (job.site, Path(job.dem).name, Path(job.targets).name) == ("a", "d.tif", "t.kml")
+
+
 def test_cli_refuses_a_missing_dem_before_starting_a_cluster(tmp_path: Path) -> None:
     jobs_file = _write(
         tmp_path / "jobs.toml",

@@ -321,6 +321,14 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--upload", "--connect", "udpin://0.0.0.0:99999"],
         ["--connect 'udpin://0.0.0.0:99999'", "port from 1 to 65535"],
     ),
+    "duplicate_names": (
+        ["--targets", str(BAD / "duplicate_names.kml")],
+        ["duplicate_names.kml", "two targets named 'Roof'", "placemark 3 and placemark 5"],
+    ),
+    "geojson_null_geometry": (
+        ["--targets", str(BAD / "geojson_null_geometry.geojson")],
+        ["geojson_null_geometry.geojson", "feature 3 'Roof'", "no geometry", "Point"],
+    ),
     "home_off_dem": (
         ["--home", "47.70,9.43"],
         ["home (--home)", "outside DEM", "move it onto the DEM"],

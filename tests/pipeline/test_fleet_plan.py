@@ -492,3 +492,12 @@ def test_a_fleet_file_is_read_from_a_path_given_as_text(tmp_path: Path) -> None:
     assert [v.speed_m_s for v in read_fleet(str(fleet))] == [6.0, None]
     with pytest.raises(SettingsError, match="does not exist"):
         read_fleet(str(tmp_path / "missing.toml"))
+
+
+def test_a_fleet_file_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
+    from urpt_gcs.pipeline.settings import read_fleet
+
+    # As Notepad saves UTF-8: the mark is no TOML statement.
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_bytes(b"\xef\xbb\xbf[[vehicle]]\nspeed_m_s = 6.0\n\n[[vehicle]]\n")
+    assert [v.speed_m_s for v in read_fleet(fleet)] == [6.0, None]

@@ -94,12 +94,47 @@ def test_kmz_reads_doc_kml(tmp_path: Path) -> None:
     )
 
 
-def test_kmz_without_doc_kml_takes_the_first_kml(tmp_path: Path) -> None:
-    first = (TARGETS / "no_namespace.kml").read_bytes()
-    second = (TARGETS / "nested_folders.kml").read_bytes()
-    path = _kmz(tmp_path / "targets.kmz", {"layers/a.KML": first, "layers/b.kml": second})
+@pytest.mark.parametrize(
+    "members",
+    [
+        {"layers/a.KML": "no_namespace", "files/icon.png": ""},  # the only .kml, in a folder
+        {"a.kml": "no_namespace", "layers/b.kml": "nested_folders"},  # the only one at the root
+        {"b.kml": "nested_folders", "doc.kml": "no_namespace", "c.kml": "nested_folders"},
+    ],
+    ids=["one_in_a_folder", "one_at_the_root", "doc_kml_among_others"],
+)
+def test_kmz_reads_its_one_kml_or_its_root_doc_kml(tmp_path: Path, members: dict[str, str]) -> None:
+    path = _kmz(
+        tmp_path / "targets.kmz",
+        {n: (TARGETS / f"{k}.kml").read_bytes() if k else b"\x89PNG" for n, k in members.items()},
+    )
 
     assert _names(read_targets(path)) == ["Chimney", "Gate"]
+
+
+@pytest.mark.parametrize(
+    ("members", "fragment"),
+    [
+        (
+            ["north.kml", "south.KML", "files/x.kml"],
+            "holds 2 .kml files at its root ('north.kml', 'south.KML') and no doc.kml to say "
+            "which to read: keep one of them, or name the one to read doc.kml",
+        ),
+        (
+            ["layers/a.KML", "layers/b.kml"],
+            "holds 2 .kml files in folders ('layers/a.KML', 'layers/b.kml'), none at its root "
+            "to say which to read",
+        ),
+        (["doc.kml", "DOC.KML"], "holds 2 .kml files named doc.kml ('doc.kml', 'DOC.KML')"),
+    ],
+)
+def test_kmz_with_several_kml_and_no_doc_kml_is_refused(
+    tmp_path: Path, members: list[str], fragment: str
+) -> None:
+    kml = (TARGETS / "no_namespace.kml").read_bytes()
+    path = _kmz(tmp_path / "kmz_several_kml.kmz", dict.fromkeys(members, kml))
+
+    _assert_error(path, fragment)
 
 
 def test_geojson_names_multipoint_and_home() -> None:
@@ -200,6 +235,10 @@ BAD_FILES = [
     ("kml_lon_out_of_range.kml", "point 'Tower' (placemark 2) with longitude 200.0"),
     ("kmz_not_a_zip.kmz", "is not a readable KMZ (zip) archive"),
     ("geojson_polygons_only.geojson", "contains no Point features"),
+    (
+        "geojson_null_geometry.geojson",
+        "has feature 3 'Roof' with no geometry (null): give it a Point geometry or remove",
+    ),
     ("geojson_malformed.geojson", "is not valid JSON (Expecting value, line 4, column 1)"),
     ("geojson_not_geojson.json", "is not GeoJSON"),
     (
@@ -215,6 +254,10 @@ BAD_FILES = [
     ),
     ("csv_header_only.csv", "has a header but no data rows"),
     ("duplicate_targets.kml", "'Bridge' (placemark 1) and point 'Bridge again' (placemark 3)"),
+    (
+        "duplicate_names.kml",
+        "has two targets named 'Roof' (placemark 3 and placemark 5): rename one of them",
+    ),
     ("empty.kml", "is empty"),
     ("two_homes.kml", "names two homes, point 'Home' (placemark 1) and point 'launch'"),
     ("only_home.kml", "has no targets besides the home point"),
@@ -281,11 +324,137 @@ def test_folder_instead_of_file(tmp_path: Path) -> None:
     _assert_error(path, "is a folder")
 
 
+@pytest.mark.parametrize(
+    ("geometry", "fragment"),
+    [
+        (None, "feature 2 'Roof' with no geometry (null)"),
+        ("POINT (8 47)", "feature 2 'Roof' with no geometry (a JSON string, not a geometry"),
+        ("absent", "feature 2 'Roof' with no geometry (the 'geometry' member is missing)"),
+    ],
+)
+def test_geojson_feature_without_a_geometry_is_refused(
+    tmp_path: Path, geometry: str | None, fragment: str
+) -> None:
+    roof: dict[str, object] = {"type": "Feature", "properties": {"name": "Roof"}}
+    if geometry != "absent":
+        roof["geometry"] = geometry
+    point = {"type": "Point", "coordinates": [8.5412, 47.3781]}
+    features = [{"type": "Feature", "properties": {}, "geometry": point}, roof]
+    path = tmp_path / "null.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+
+    _assert_error(path, fragment)
+
+
+# Each format, with a name holding a character no output can hold: (file name, its text,
+# what the message says). A KML can only carry those XML 1.0 allows (DEL and C1 controls).
+_KML_NAME = (
+    '<kml xmlns="http://www.opengis.net/kml/2.2"><Placemark><name>Roof</name><Point>'
+    "<coordinates>8.5420,47.3790</coordinates></Point></Placemark><Placemark><name>{}</name>"
+    "<Point><coordinates>8.5412,47.3781</coordinates></Point></Placemark></kml>"
+)
+_GEOJSON_NAME = (
+    '{{"type": "Feature", "properties": {{"name": "{}"}},'
+    ' "geometry": {{"type": "MultiPoint", "coordinates": [[8.5412, 47.3781], [8.542, 47.379]]}}}}'
+)
+UNFIT_NAMES = [
+    ("nul.csv", "name,lat,lon\nRoof,47.379,8.542\nMast\0,47.3781,8.5412\n", "row 3", "U+0000"),
+    ("bell.csv", "lat;lon;name\n47.3781;8.5412; \x07\n", "row 2", "control character U+0007"),
+    ("cr.csv", 'name,lat,lon\nRoof,47.379,8.542\n"a\rb",47.3781,8.5412\n', "row 3", "U+000D"),
+    ("fs.csv", "name,lat,lon\n\x1cRoof,47.379,8.542\n", "row 2", "control character U+001C"),
+    ("del.kml", _KML_NAME.format("Mast&#x7f;"), "placemark 2", "control character U+007F"),
+    ("c1.kml", _KML_NAME.format("Mast\x9b"), "placemark 2", "control character U+009B"),
+    ("nel.kml", _KML_NAME.format("Mast&#x85;"), "placemark 2", "control character U+0085"),
+    ("esc.geojson", _GEOJSON_NAME.format("\\u001b"), "feature 1", "U+001B"),
+    (
+        "surrogate.json",
+        _GEOJSON_NAME.format("\\udfff"),
+        "feature 1",
+        "lone surrogate U+DFFF",
+    ),
+    ("nonchar.geojson", _GEOJSON_NAME.format("\\ufdd0"), "feature 1", "U+FDD0"),
+    ("plane_16.geojson", _GEOJSON_NAME.format("\U0010ffff"), "feature 1", "U+10FFFF"),
+]
+
+
+@pytest.mark.parametrize(("filename", "text", "where", "what"), UNFIT_NAMES)
+def test_a_name_no_output_can_hold_is_refused_in_every_format(
+    tmp_path: Path, filename: str, text: str, where: str, what: str
+) -> None:
+    path = tmp_path / filename
+    path.write_text(text, encoding="utf-8", errors="surrogatepass")
+    message = _assert_error(path, f" ({where}) whose name holds ")
+
+    assert what in message
+    assert message.endswith(": remove it from the name")
+
+
+def test_a_kmz_name_is_checked_as_its_kml(tmp_path: Path) -> None:
+    kml = _KML_NAME.format("Mast&#x85;").encode()
+    path = _kmz(tmp_path / "targets.kmz", {"doc.kml": kml})
+
+    _assert_error(path, "targets.kmz' has point 'Mast\\x85' (placemark 2) whose name holds the")
+
+
+def test_a_tab_in_a_name_is_read_as_a_space(tmp_path: Path) -> None:
+    path = tmp_path / "points.csv"
+    path.write_text('name,lat,lon\n"Bridge\tpier",47.3781,8.5412\n\t Roof \t,47.379,8.542\n')
+
+    assert _names(read_targets(path)) == ["Bridge pier", "Roof"]
+
+
+def test_a_name_given_twice_is_refused_in_every_format(tmp_path: Path) -> None:
+    csv_path = tmp_path / "twice.csv"
+    csv_path.write_text("name,lat,lon\nRoof,47.379,8.542\nMast,47.3781,8.5412\nRoof,47.4,8.6\n")
+    _assert_error(csv_path, "has two targets named 'Roof' (row 2 and row 4): rename one of them")
+    multi = {"type": "MultiPoint", "coordinates": [[8.5412, 47.3781], [8.542, 47.379]]}
+    one = {"type": "Point", "coordinates": [8.6, 47.4]}
+    features = [
+        {"type": "Feature", "properties": {"name": "Masts"}, "geometry": g} for g in (multi, one)
+    ]
+    json_path = tmp_path / "twice.geojson"
+    json_path.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    _assert_error(json_path, "two targets named 'Masts' (feature 1 and feature 2)")
+
+
+def test_made_up_names_never_take_a_name_the_file_gives(tmp_path: Path) -> None:
+    # Target 2 is unnamed (T2), and the file names target 3 T2; a multi-point placemark's
+    # second point (Masts-2) meets a placemark named Masts-2.
+    path = tmp_path / "points.kml"
+    path.write_text(
+        '<kml xmlns="http://www.opengis.net/kml/2.2">'
+        "<Placemark><name>A</name><Point><coordinates>8.50,47.30</coordinates></Point></Placemark>"
+        "<Placemark><Point><coordinates>8.51,47.31</coordinates></Point></Placemark>"
+        "<Placemark><name>T2</name><Point><coordinates>8.52,47.32</coordinates></Point>"
+        "</Placemark><Placemark><name>Masts</name><MultiGeometry>"
+        "<Point><coordinates>8.53,47.33</coordinates></Point>"
+        "<Point><coordinates>8.54,47.34</coordinates></Point></MultiGeometry></Placemark>"
+        "<Placemark><name>Masts-2</name><Point><coordinates>8.55,47.35</coordinates></Point>"
+        "</Placemark><Placemark><Point><coordinates>8.56,47.36</coordinates></Point></Placemark>"
+        "</kml>"
+    )
+
+    names = _names(read_targets(path))
+
+    assert names == ["A", "T2 (2)", "T2", "Masts-1", "Masts-2 (2)", "Masts-2", "T7"]
+
+
+@pytest.mark.parametrize(
+    "path",
+    sorted(TARGETS.iterdir()) + sorted((DATA.parents[1] / "missions").glob("*/targets.*")),
+    ids=lambda p: p.name,
+)
+def test_every_good_sample_and_mission_still_reads(path: Path) -> None:
+    names = _names(read_targets(path))
+
+    assert len(set(names)) == len(names)
+
+
 def test_name_with_newline_keeps_message_on_one_line(tmp_path: Path) -> None:
     path = tmp_path / "points.csv"
     path.write_text('name,lat,lon\n"Roof\nnorth",95,8.5\n')
 
-    _assert_error(path, "point 'Roof\\nnorth' (row 3) with latitude 95.0")
+    _assert_error(path, "point 'Roof\\nnorth' (row 2) with latitude 95.0")
 
 
 # --- fuzzing -------------------------------------------------------------------------------

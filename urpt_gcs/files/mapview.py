@@ -5,6 +5,9 @@ Drawn with matplotlib's object API (no pyplot, no global state) in the planning 
 distances on the picture are metres on the ground. A plan inside a height band has no
 regions; its stops are coloured by their height above the surface and a profile per sortie
 is drawn below the map (:mod:`urpt_gcs.files.bandview`).
+
+Text from the inputs (target names, the DEM's CRS name) is drawn as plain text: a ``$`` in
+a name is a dollar sign, never the start of matplotlib math or TeX.
 """
 
 from __future__ import annotations
@@ -40,6 +43,8 @@ from urpt_gcs.site.terrain import Terrain
 
 # Longest side of the raster drawn, in pixels; larger windows are decimated for display.
 _MAX_DISPLAY_PX = 1600
+# Text properties for words from the inputs: drawn as written, whatever the rcParams say.
+_PLAIN: dict[str, Any] = {"parse_math": False, "usetex": False}
 
 
 def _nice_length(span_m: float) -> float:
@@ -236,6 +241,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
             fontsize=7,
             zorder=6,
             bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0},
+            **_PLAIN,
         )
 
     hx, hy = plan.home_xy
@@ -271,7 +277,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     _scale_bar_and_north(ax, lo - pad, hi + pad)
-    ax.set_xlabel(f"easting (m, {plan.crs.name})")
+    ax.set_xlabel(f"easting (m, {plan.crs.name})", **_PLAIN)
     ax.set_ylabel("northing (m)")
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.tick_params(labelsize=7)
@@ -405,7 +411,9 @@ def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
         tx, ty = plan.targets_xy[:, 0], plan.targets_xy[:, 1]
         ax.scatter(tx, ty, marker="^", s=50, color=colour, edgecolors="black", zorder=5)
         for x, y, t in zip(tx, ty, plan.targets.targets, strict=True):
-            ax.annotate(t.name, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=6)
+            ax.annotate(
+                t.name, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=6, **_PLAIN
+            )
         label = (
             f"vehicle {number}: {len(plan.targets.targets)} targets, "
             f"{plan.flown_length_m:.0f} m, {plan.flight_time_s / 60:.1f} min at "
@@ -432,7 +440,7 @@ def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     _scale_bar_and_north(ax, lo - pad, hi + pad)
-    ax.set_xlabel(f"easting (m, {widest.crs.name})")
+    ax.set_xlabel(f"easting (m, {widest.crs.name})", **_PLAIN)
     ax.set_ylabel("northing (m)")
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.tick_params(labelsize=7)

@@ -1,7 +1,12 @@
 """Targets: the points to photograph, read from KML/KMZ, GeoJSON or CSV.
 
-One small reader per format turns the bytes into raw points; :func:`_check` then validates them,
-takes out the home point and names unnamed targets. Every problem is a one-line TargetsError.
+One small reader per format turns the bytes into raw points; :func:`_check` then validates them
+(positions and names alike, whatever the format), takes out the home point and names unnamed
+targets. Every problem is a one-line TargetsError.
+
+Names are data: they reach the map, the KML and the GeoJSON as the file writes them (a tab
+read as a space, blanks around trimmed), so a name no output can hold is refused here, with
+the target's position in the file, rather than mangled on the way out.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import itertools
 import json
 import math
 import re
+import unicodedata
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -66,14 +72,18 @@ _ZIP_ERRORS += (EOFError, OSError, RuntimeError, ValueError)
 class _Point:
     """A point as read from the file, before home and default names are settled."""
 
-    name: str | None
+    name: str | None  # as the file gives it; a multi-point placemark's for each of its points
     where: str  # where the operator finds it in the file: "placemark 3", "row 4", ...
     is_home: bool
     lat_deg: float
     lon_deg: float
+    part: int = 0  # k for the k-th point of a multi-point placemark or feature, else 0
+
+    def place(self) -> str:
+        return f"{self.where}, point {self.part}" if self.part else self.where
 
     def label(self) -> str:
-        return f"{'point ' + _q(self.name) if self.name else 'unnamed point'} ({self.where})"
+        return f"{'point ' + _q(self.name) if self.name else 'unnamed point'} ({self.place()})"
 
 
 def _q(text: str, limit: int = 60) -> str:
@@ -88,14 +98,39 @@ def _error(source: str, problem: str, fix: str) -> TargetsError:
 
 def _points(name: str | None, where: str, lon_lats: list[tuple[float, float]]) -> list[_Point]:
     """Raw points of one placemark/feature; a multi-point one gets its points numbered."""
-    name = name.strip() if name and name.strip() else None
+    # Only blanks are trimmed (str.strip would also cut control characters, unseen).
+    name = (name.replace("\t", " ").strip(" \r\n") if name else "") or None
     is_home = name is not None and name.casefold() in HOME_NAMES
     if len(lon_lats) == 1:
         return [_Point(name, where, is_home, lon_lats[0][1], lon_lats[0][0])]
     return [
-        _Point(name and f"{name}-{k}", f"{where}, point {k}", is_home, lat, lon)
+        _Point(name, where, is_home, lat, lon, part=k)
         for k, (lon, lat) in enumerate(lon_lats, start=1)
     ]
+
+
+# What no output can hold: control characters (C0 but the tab, DEL, C1; XML 1.0 forbids most
+# and the rest are invisible), surrogates (a lone one cannot even be written as UTF-8) and
+# noncharacters (U+FDD0..U+FDEF and the last two code points of every plane).
+_UNFIT = re.compile(
+    "[\x00-\x1f\x7f-\x9f\ud800-\udfff\ufdd0-\ufdef"
+    + "".join(chr(plane << 16 | 0xFFFE) + chr(plane << 16 | 0xFFFF) for plane in range(17))
+    + "]"
+)
+
+
+def _name_problem(name: str) -> str | None:
+    """What in ``name`` no output can hold, in the operator's words; None if nothing."""
+    found = _UNFIT.search(name)
+    if found is None:
+        return None
+    char = found.group()
+    code = f"U+{ord(char):04X}"
+    if unicodedata.category(char) == "Cc":
+        return f"the control character {code}"
+    if unicodedata.category(char) == "Cs":
+        return f"a lone surrogate {code} (half of a UTF-16 pair)"
+    return f"the noncharacter {code}"
 
 
 def _decode(source: str, data: bytes, fix: str) -> str:
@@ -157,21 +192,39 @@ def _kml_lon_lat(source: str, where: str, name: str | None, point: Element) -> t
 
 
 def _kmz_points(source: str, data: bytes) -> list[_Point]:
+    """The points of a KMZ's one KML, as Google Earth picks it (the KML 2.2 convention): the
+    ``doc.kml`` at the archive's root, else the one ``.kml`` at the root, else the one
+    ``.kml`` in its folders. Several candidates and no ``doc.kml`` are refused, not guessed
+    between; the other ``.kml`` files beside a root ``doc.kml`` are not read."""
     fix = "export the file again as KMZ, or save it as KML"
-    member: str | None = None
+    candidates: list[str] = []
     kml = b""
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as archive:
             names = [i.filename for i in archive.infolist() if not i.is_dir()]
             kml_names = [n for n in names if n.lower().endswith(".kml")]
-            member = "doc.kml" if "doc.kml" in names else next(iter(kml_names), None)
-            if member is not None:
-                with archive.open(member) as stream:
+            at_root = [n for n in kml_names if "/" not in n and "\\" not in n]
+            docs = [n for n in at_root if n.lower() == "doc.kml"]
+            candidates = docs or at_root or kml_names
+            if len(candidates) == 1:
+                with archive.open(candidates[0]) as stream:
                     kml = stream.read(_KMZ_MEMBER_LIMIT_BYTES + 1)
     except _ZIP_ERRORS as exc:
         raise _error(source, f"is not a readable KMZ (zip) archive ({_q(str(exc))})", fix) from exc
-    if member is None:
+    if not candidates:
         raise _error(source, "is a KMZ archive without a .kml file inside", fix)
+    if len(candidates) > 1:
+        count = len(candidates)
+        shown = ", ".join(_q(n) for n in candidates[:4]) + (", ..." if count > 4 else "")
+        if docs:
+            problem = f"holds {count} .kml files named doc.kml ({shown})"
+        elif at_root:
+            problem = f"holds {count} .kml files at its root ({shown}) and no doc.kml"
+        else:
+            problem = f"holds {count} .kml files in folders ({shown}), none at its root"
+        fix = "keep one of them, or name the one to read doc.kml at the archive's root"
+        raise _error(source, f"{problem} to say which to read", fix)
+    member = candidates[0]
     if len(kml) > _KMZ_MEMBER_LIMIT_BYTES:
         raise _error(source, f"has a KML member {_q(member)} over 64 MiB", fix)
     return _kml_points(f"{source}!{member}", kml)
@@ -200,7 +253,20 @@ def _geojson_points(source: str, data: bytes) -> list[_Point]:
     for where, feature in features:
         if not isinstance(feature, dict):
             raise _error(source, f"has {where} that is not a JSON object", fix)
-        lon_lats = _geojson_lon_lats(source, where, feature.get("geometry"))
+        geometry = feature.get("geometry")
+        if not isinstance(geometry, dict):
+            # RFC 7946 allows an unlocated feature; a target without a place cannot be flown.
+            name = _geojson_name(feature)
+            shown = f"{where} {_q(name)}" if name else f"{where} (unnamed)"
+            if "geometry" not in feature:
+                why = "the 'geometry' member is missing"
+            elif geometry is None:
+                why = "null"
+            else:
+                why = f"a JSON {_JSON_KINDS[type(geometry)]}, not a geometry object"
+            problem = f"has {shown} with no geometry ({why})"
+            raise _error(source, problem, "give it a Point geometry or remove the feature")
+        lon_lats = _geojson_lon_lats(source, where, geometry)
         if lon_lats:
             points.extend(_points(_geojson_name(feature), where, lon_lats))
     if not points:
@@ -208,6 +274,9 @@ def _geojson_points(source: str, data: bytes) -> list[_Point]:
         raise _error(source, problem, "add a Point feature for each target")
     crs = _geojson_crs(source, doc.get("crs"))
     return points if crs is None else _to_wgs84(source, crs, points)
+
+
+_JSON_KINDS = {list: "array", str: "string", bool: "true or false", int: "number", float: "number"}
 
 
 def _geojson_crs(source: str, member: Any) -> pyproj.CRS | None:
@@ -303,13 +372,15 @@ def _csv_points(source: str, data: bytes) -> list[_Point]:
     try:
         header = next((row for row in reader if any(f.strip() for f in row)), [])
         columns = _csv_columns(source, [h.strip().lower() for h in header], fix)
+        starts = reader.line_num + 1
         for row in reader:
+            # A row is named by the line it starts on: a quoted field may span lines.
+            where, starts = f"row {starts}", reader.line_num + 1
             if not any(field.strip() for field in row):
                 continue
-            where = f"row {reader.line_num}"
-            fields = {key: row[i].strip() if i < len(row) else "" for key, i in columns.items()}
-            lat = _csv_number(source, where, "lat", fields["lat"], delimiter)
-            lon = _csv_number(source, where, "lon", fields["lon"], delimiter)
+            fields = {key: row[i] if i < len(row) else "" for key, i in columns.items()}
+            lat = _csv_number(source, where, "lat", fields["lat"].strip(), delimiter)
+            lon = _csv_number(source, where, "lon", fields["lon"].strip(), delimiter)
             points.extend(_points(fields.get("name"), where, [(lon, lat)]))
     except csv.Error as exc:
         problem = f"is not readable CSV at line {reader.line_num} ({_q(str(exc))})"
@@ -400,25 +471,61 @@ def _check(source: str, points: list[_Point], swap_fix: str) -> TargetSet:
                 if _looks_swapped(p, points):
                     fix = f"did you swap lat and lon? {swap_fix[0].upper()}{swap_fix[1:]}"
                 raise _error(source, problem, fix)
+        if p.name is not None and (unfit := _name_problem(p.name)) is not None:
+            # The placemark's name, not one point's: a multi-point one shares it.
+            problem = f"has point {_q(p.name)} ({p.where}) whose name holds {unfit}"
+            raise _error(source, problem, "remove it from the name")
     homes = [p for p in points if p.is_home]
     if len(homes) > 1:
         problem = f"names two homes, {homes[0].label()} and {homes[1].label()}"
         raise _error(source, problem, "keep one point named Home or Launch")
-    targets: list[Target] = []
-    wheres: list[str] = []
-    for p in points:
-        if not p.is_home:
-            targets.append(Target(p.name or f"T{len(targets) + 1}", p.lat_deg, p.lon_deg))
-            wheres.append(p.where)
-    if not targets:
+    kept = [p for p in points if not p.is_home]
+    if not kept:
         raise _error(source, "has no targets besides the home point", "add the points to visit")
+    names = _target_names(kept)
+    targets = [Target(n, p.lat_deg, p.lon_deg) for n, p in zip(names, kept, strict=True)]
     duplicate = _first_duplicate(targets)
     if duplicate is not None:
-        labels = [f"point {_q(targets[i].name)} ({wheres[i]})" for i in duplicate]
+        labels = [f"point {_q(names[i])} ({kept[i].place()})" for i in duplicate]
         problem = f"has {labels[0]} and {labels[1]} at the same place"
         raise _error(source, problem, "remove one of them")
+    _refuse_a_name_given_twice(source, kept)
     home = Target(homes[0].name or "Home", homes[0].lat_deg, homes[0].lon_deg) if homes else None
     return TargetSet(targets=tuple(targets), home=home, source=source)
+
+
+def _target_names(points: list[_Point]) -> list[str]:
+    """Each target's name: the one the file gives it, else one made up that no other target
+    has. A made-up name is ``T<n>`` (n counts targets, 1-based) or, for the k-th point of a
+    multi-point placemark, ``<name>-<k>``; should the file give another target that name,
+    `` (2)``, `` (3)``, ... is added until it is free."""
+    taken = {p.name for p in points if p.name is not None and not p.part}
+    names = []
+    for n, p in enumerate(points, start=1):
+        if p.name is not None and not p.part:
+            names.append(p.name)
+            continue
+        made = f"T{n}" if p.name is None else f"{p.name}-{p.part}"
+        name, k = made, 1
+        while name in taken:
+            k += 1
+            name = f"{made} ({k})"
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+def _refuse_a_name_given_twice(source: str, points: list[_Point]) -> None:
+    """Refuse two placemarks (features, rows) the file gives one name: a name is how the
+    operator finds a target in the outputs, so it must say which one."""
+    first: dict[str, _Point] = {}
+    for p in points:
+        if p.name is None or p.part > 1:  # a multi-point placemark names its points once
+            continue
+        earlier = first.setdefault(p.name, p)
+        if earlier is not p:
+            problem = f"has two targets named {_q(p.name)} ({earlier.where} and {p.where})"
+            raise _error(source, problem, "rename one of them")
 
 
 def _first_duplicate(targets: list[Target]) -> tuple[int, int] | None:
@@ -461,15 +568,22 @@ def read_targets(path: Path) -> TargetSet:
     Returns
     -------
     TargetSet
-        The targets in file order, unnamed ones named ``T<n>`` (1-based among targets); the
-        point named ``Home`` or ``Launch`` (any case) as ``home``; ``source`` is ``str(path)``.
+        The targets in file order, named as the file names them (a tab read as a space,
+        blanks around trimmed), unnamed ones ``T<n>`` (1-based among targets) and the k-th
+        point of a multi-point placemark ``<name>-<k>``, made-up names kept apart from the
+        file's by `` (2)``, `` (3)``, ...; the point named ``Home`` or ``Launch`` (any case)
+        as ``home``; ``source`` is ``str(path)``. A KMZ is read from its root ``doc.kml``,
+        else its one ``.kml`` file (see :func:`_kmz_points`).
 
     Raises
     ------
     TargetsError
         If the file is missing, not a regular file, over 64 MiB, unreadable, empty, of an
         unknown kind, malformed or declares XML entities; if it has no targets, a point off
-        the globe, two homes or two targets within 1e-7 degrees of each other.
+        the globe, two homes or two targets within 1e-7 degrees of each other; if two
+        targets have one name, or a name holds a control character, a noncharacter or a
+        lone surrogate; if a GeoJSON feature has no geometry; if a KMZ holds several
+        ``.kml`` files and no ``doc.kml`` to say which to read.
     """
     source = str(path)
     reader = _READERS.get(path.suffix.lower())
