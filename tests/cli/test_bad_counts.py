@@ -120,8 +120,6 @@ def test_a_bench_refuses_an_out_that_is_a_file_before_it_runs(
         (["bench", "paper", "--quick", "--heuristic-time", "-1"], "--heuristic-time"),
         (["bench", "paper", "--quick", "--bound-time", "inf"], "--bound-time"),
         (["upload", "plan.plan", "--timeout", "nan"], "--timeout"),
-        (["sitl", "--loss", "nan"], "--loss"),
-        (["sitl", "--loss", "1.5"], "--loss"),
     ],
 )
 def test_a_number_that_is_not_finite_or_in_range_is_a_usage_error_naming_its_flag(

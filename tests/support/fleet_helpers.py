@@ -30,6 +30,7 @@ class Vehicle:
     targets: tuple[str, ...]  # name prefixes, e.g. "T01"
     altitude_m: float
     home: tuple[float, float] = HOME
+    args: tuple[str, ...] = ()  # more flags of its plan (``--endurance 4``: two sorties)
 
 
 def build_fleet(
@@ -52,7 +53,7 @@ def build_fleet(
             "plan", "--dem", str(SITE), "--targets", str(subset), "--out", str(out / folder),
             "--altitude", f"{vehicle.altitude_m:g}",
             "--home", f"{vehicle.home[0]},{vehicle.home[1]}",
-            "--time-limit", "1", "--no-map", "--quiet",
+            "--time-limit", "1", "--no-map", "--quiet", *vehicle.args,
         ]  # fmt: skip
         result = CliRunner().invoke(main, args)
         assert result.exit_code == 0, result.output

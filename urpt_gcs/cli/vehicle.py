@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import click
 
 from urpt_gcs.cli._root import main, terminal_progress, upload_and_report
+from urpt_gcs.cli.options import NON_NEGATIVE, POSITIVE, Finite
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.vehicle.protocol import DEFAULT_URL
 
@@ -59,7 +60,7 @@ __all__ = ["sitl_group", "sitl_replay_command", "upload_command"]
 )
 @click.option(
     "--timeout",
-    type=float,
+    type=POSITIVE,
     default=10.0,
     show_default=True,
     help="Seconds to wait for the autopilot's heartbeat.",
@@ -79,6 +80,7 @@ def upload_command(
     With --fleet, each vehicle of a fleet plan gets its own mission, verified on its own.
     """
     from urpt_gcs.files.mission_file import read_fence, read_mission
+    from urpt_gcs.files.plan_check import summary_warning
 
     if fleet_dir is not None:
         if mission_file is not None:
@@ -93,6 +95,9 @@ def upload_command(
         raise SettingsError("several --connect are for --fleet: give one for a single mission")
     mission = read_mission(mission_file, flag="urpt-gcs upload")
     fence = read_fence(mission_file)
+    warning = summary_warning(mission_file, mission)
+    if warning is not None:
+        click.echo(f"urpt-gcs: warning: {warning}", err=True)
     url = connects[0] if connects else DEFAULT_URL
     upload_and_report(mission, url, retries, timeout, quiet=False, fence=fence)
 
@@ -228,17 +233,19 @@ def sitl_group(
     help="Fly every vehicle of a fleet plan at once (the --out folder of plan --vehicles) and "
     "check their separation.",
 )
-@click.option("--speedup", type=float, default=50.0, show_default=True, help="Simulated s per s.")
+@click.option(
+    "--speedup", type=POSITIVE, default=50.0, show_default=True, help="Simulated s per s."
+)
 @click.option(
     "--fov",
-    type=float,
+    type=Finite(0.0, 90.0, min_open=True, max_open=True),
     default=None,
     help="Camera half-angle, degrees [default: as planned (the .plan, or summary.json beside a "
     ".waypoints), else 30].",
 )
 @click.option(
     "--min-clearance",
-    type=float,
+    type=NON_NEGATIVE,
     default=None,
     help="Least height above the terrain on cruise legs, m [default: as planned, else 10].",
 )
@@ -249,7 +256,7 @@ def sitl_group(
     show_default=True,
     help="Take off in AUTO (AUTO_OPTIONS=2) or in GUIDED before AUTO.",
 )
-@click.option("--timeout", type=float, default=None, help="Wall-clock limit for the flight, s.")
+@click.option("--timeout", type=POSITIVE, default=None, help="Wall-clock limit for the flight, s.")
 @click.option(
     "--connect",
     default=None,
@@ -293,8 +300,8 @@ def sitl_replay_command(
     """Fly a mission via MAVSDK on the simulated copter, ArduCopter SITL or PX4 SITL; check
     photos and clearance on the DEM.
 
-    Each sortie is checked on the targets it was planned to photograph; several sorties are
-    also checked together on every target of --targets.
+    A plan of one sortie is checked on every target of --targets; each sortie of several on
+    the targets it was planned to photograph, and all of them together on every target.
     """
     from urpt_gcs.files.mission_file import mission_files
     from urpt_gcs.replay.ardupilot import ENV_VAR, resolve_binary

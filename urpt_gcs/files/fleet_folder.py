@@ -1,15 +1,17 @@
 """A fleet plan's folder, as ``urpt-gcs plan --vehicles K --out OUT`` writes it.
 
-``OUT/summary.json`` holds a ``fleet`` block (each vehicle's folder, altitude, home and
-targets, and how the vehicles are kept apart); ``OUT/vehicle_k/`` holds exactly what a
-single-vehicle plan writes. :func:`read_fleet` reads the block and finds each vehicle's
-mission files; upload and replay work from what it returns.
+``OUT/summary.json`` holds a ``fleet`` block (each vehicle's folder, altitude, home,
+targets, sorties and the SHA-256 of each of its mission files, and how the vehicles are kept
+apart); ``OUT/vehicle_k/`` holds exactly what a single-vehicle plan writes. :func:`read_fleet`
+reads the block and finds each vehicle's mission files; upload and replay work from what it
+returns. A summary written before the digests were recorded has none, and reads the same.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -18,6 +20,7 @@ from urpt_gcs.errors import MissionFileError
 from urpt_gcs.files.mission_file import PLAN_STEM
 
 __all__ = [
+    "MISSION_FILE_NAME",
     "SUMMARY_MAX_BYTES",
     "SUMMARY_NAME",
     "FleetFolder",
@@ -30,6 +33,9 @@ __all__ = [
 SUMMARY_NAME = "summary.json"
 SUMMARY_MAX_BYTES = 16 * 1024 * 1024
 SeparationMode = Literal["altitude", "time"]
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+# The name of a mission file a plan writes: one sortie's, or sortie N's, .plan or .waypoints.
+MISSION_FILE_NAME = re.compile(PLAN_STEM.pattern + r"\.(?:plan|waypoints)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +59,11 @@ class FleetVehicle:
     start_delay_s
         How long after the fleet's common start it takes off (the plan keeps vehicles that
         share a home or cross paths apart by these delays).
+    sorties_planned
+        How many sorties the summary says it flies (None: it does not say).
+    mission_sha256
+        (file name, SHA-256 in hex) of each mission file as the plan wrote it; empty for a
+        summary written before these were recorded.
     """
 
     number: int
@@ -62,6 +73,8 @@ class FleetVehicle:
     targets: tuple[str, ...]
     flight_time_s: float | None = None
     start_delay_s: float = 0.0
+    sorties_planned: int | None = None
+    mission_sha256: tuple[tuple[str, str], ...] = ()
 
     @property
     def name(self) -> str:
@@ -166,7 +179,41 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
             f"{where}: vehicle {number}'s start delay {delay_s:g} s is negative: plan the "
             "fleet again"
         )
-    return FleetVehicle(number, sub, missions, altitude, tuple(targets), flight_s, delay_s)
+    sorties = row.get("sorties")
+    if sorties is not None and (
+        not isinstance(sorties, int) or isinstance(sorties, bool) or sorties < 1
+    ):
+        raise MissionFileError(
+            f'{where}: vehicle {number}\'s "sorties" is {sorties!r}, not a count: plan the '
+            "fleet again"
+        )
+    return FleetVehicle(
+        number,
+        sub,
+        missions,
+        altitude,
+        tuple(targets),
+        flight_s,
+        delay_s,
+        sorties,
+        _digests(row.get("mission_sha256", {}), f"{where}: vehicle {number}'s"),
+    )
+
+
+def _digests(value: Any, what: str) -> tuple[tuple[str, str], ...]:
+    """The ``mission_sha256`` block: mission file name -> its SHA-256 in hex."""
+    if not isinstance(value, dict) or not all(
+        isinstance(name, str)
+        and MISSION_FILE_NAME.fullmatch(name)
+        and isinstance(digest, str)
+        and _SHA256.fullmatch(digest)
+        for name, digest in value.items()
+    ):
+        raise MissionFileError(
+            f'{what} "mission_sha256" is not mission file names with their SHA-256: plan the '
+            "fleet again"
+        )
+    return tuple(sorted(value.items()))
 
 
 def _missions(folder: Path) -> tuple[Path, ...]:

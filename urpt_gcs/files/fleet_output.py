@@ -2,21 +2,24 @@
 
 ``OUT/vehicle_k/`` holds exactly what ``plan --out`` writes for vehicle k alone (so
 ``upload`` and ``sitl replay --plan`` work on it unchanged); ``OUT/summary.json`` holds the
-``fleet`` block (every vehicle's layer, home, speed, flight time, length, sorties, targets and
-start delay; the makespan, its lower bound and gap; the separation and the planned closest
-approach), and ``OUT/map.png``, ``OUT/plan.kml`` and ``OUT/plan.geojson`` show every vehicle
-in its own colour. Everything is committed as one set: all of it appears, or none.
+``fleet`` block (every vehicle's layer, home, speed, flight time, length, sorties, targets,
+start delay and the SHA-256 of each of its mission files as written; the makespan, its lower
+bound and gap; the separation and the planned closest approach), and ``OUT/map.png``,
+``OUT/plan.kml`` and ``OUT/plan.geojson`` show every vehicle in its own colour. Everything is
+committed as one set: all of it appears, or none.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from urpt_gcs.files.formats.geo import fleet_geojson, fleet_kml
 from urpt_gcs.files.output import Destination, commit
+from urpt_gcs.files.plan_check import mission_digests
 from urpt_gcs.files.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
 from urpt_gcs.pipeline.fleet import FleetPlan
 
@@ -50,8 +53,11 @@ def _delayed(fleet: FleetPlan, times_s: tuple[float, ...]) -> float:
     return max(d + t for d, t in zip(delays, times_s, strict=True))
 
 
-def fleet_summary(fleet: FleetPlan, files: list[str]) -> dict[str, Any]:
-    """What the top-level ``summary.json`` holds."""
+def fleet_summary(
+    fleet: FleetPlan, files: list[str], missions: Sequence[Mapping[str, str | bytes]] = ()
+) -> dict[str, Any]:
+    """What the top-level ``summary.json`` holds; ``missions``, each vehicle's files as
+    rendered (name -> content), give the digests ``upload --fleet`` checks them by."""
     sep = fleet.separation
     closest = sep.closest
     vehicles = []
@@ -77,6 +83,8 @@ def fleet_summary(fleet: FleetPlan, files: list[str]) -> dict[str, Any]:
                 "targets": [t.name for t in plan.targets.targets],
             }
         )
+        if missions:
+            vehicles[-1]["mission_sha256"] = mission_digests(missions[number - 1])
     bound = fleet.bound
     return {
         "fleet": {
@@ -200,7 +208,8 @@ def write_fleet_products(
         listed += [str(dest.folder / name) for name in files]
     own = {"plan.kml": fleet_kml(fleet.plans), "plan.geojson": fleet_geojson(fleet.plans)}
     names = [*own, SUMMARY_FILE] + ([MAP_FILE] if with_map else [])
-    data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed)
+    rendered = [files for _dest, files in writes]
+    data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed, rendered)
     top_files: dict[str, str | bytes] = {**own, SUMMARY_FILE: json.dumps(data, indent=2) + "\n"}
     if with_map:
         # matplotlib loads only when a map is drawn.

@@ -666,14 +666,15 @@ def replay(
     plan_path: Path,
     settings: ReplaySettings | None = None,
     progress: Progress | None = None,
+    alone: bool = True,
 ) -> ReplayReport:
     """Fly the mission in ``plan_path`` and check it against the DEM and the targets.
 
     Returns
     -------
     ReplayReport
-        Photos, which photo sees each target, the least clearance, times; ``ok`` only if
-        every target was seen and every cruise leg kept its clearance.
+        Photos, which photo sees each target, the least clearance, times; ``ok`` only if every
+        target (all of the file's, for a plan's only sortie ``alone``) was seen, every leg clear.
     """
     settings = settings or ReplaySettings()
     mission = read_mission(plan_path)
@@ -682,7 +683,7 @@ def replay(
     read_targets(targets_path)
     expected = expected_checks(plan_path, mission, settings.fov_deg, settings.min_clearance_m)
     flight = fly(mission, settings, progress)
-    return judge(flight, mission, dem_path, targets_path, expected, str(plan_path))
+    return judge(flight, mission, dem_path, targets_path, expected, str(plan_path), alone)
 
 
 def replay_set(
@@ -694,5 +695,5 @@ def replay_set(
 ) -> SetReport:
     """Replay each mission file on its own simulator, judge each on its own targets, and all
     of them together on every target of ``targets_path``."""
-    reports = [replay(dem_path, targets_path, p, settings, progress) for p in plan_paths]
+    reports = [replay(dem_path, targets_path, p, settings, progress, False) for p in plan_paths]
     return judge_set(reports, dem_path, targets_path)

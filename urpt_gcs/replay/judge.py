@@ -8,13 +8,10 @@ must be within 5 degrees of the one its waypoint turns to) and within the GSD di
 positions are those CAMERA_FEEDBACK reported, at the altitude above home it reported plus the
 planned home's ground elevation, so the DEM's vertical datum cancels out as in planning.
 
-What is checked comes with the mission (:func:`expected_checks`): a ``.plan`` urpt-gcs wrote
-names the camera half-angle, the least clearance and the targets of its sortie
-(:class:`~urpt_gcs.files.formats.qgc_plan.ReplayCheck`); a ``.waypoints`` has no room for them and
-takes them from the ``summary.json`` beside it, if that describes it; otherwise every target
-of the target file at ``--fov``. A ``--fov`` or ``--min-clearance`` given overrides the plan's,
-with a warning where they differ. Several sorties replayed together are judged each on its
-own targets and, by :func:`judge_set`, all their photos on every target of the file.
+What is checked comes with the mission (:mod:`urpt_gcs.replay.expected`): the camera, the
+clearance and the targets of its sortie; a plan's only sortie replayed alone is judged on
+every target of the target file as well. Several sorties replayed together are judged each on
+its own targets and, by :func:`judge_set`, all their photos on every target of the file.
 
 Clearance is measured along the cruise legs: between consecutive GLOBAL_POSITION_INT fixes
 at the flight plane's altitude, the straight segment's least height above the DEM's bilinear
@@ -28,10 +25,9 @@ fix away from home is judged against the band (:mod:`urpt_gcs.replay.band_track`
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,20 +36,23 @@ import numpy.typing as npt
 import pyproj
 
 from urpt_gcs.arrays import BoolArray, FloatArray
-from urpt_gcs.files.formats.qgc_plan import read_replay_check
-from urpt_gcs.flight.mission import Mission, photo_headings, photo_positions
-from urpt_gcs.replay.band_track import (
-    HOME_RADIUS_M,
-    BandTrack,
-    band_of_summary,
-    band_track,
-    band_track_text,
+from urpt_gcs.flight.mission import Mission, photo_headings
+from urpt_gcs.replay.band_track import HOME_RADIUS_M, BandTrack, band_track, band_track_text
+from urpt_gcs.replay.expected import (
+    DEFAULT_FOV_DEG,
+    DEFAULT_MIN_CLEARANCE_M,
+    SAME_PLACE_DEG,
+    SUMMARY_FILE,
+    Expected,
+    Unplanned,
+    chosen_targets,
+    expected_checks,
 )
 from urpt_gcs.replay.record import Flight
 from urpt_gcs.site.camera import Frame, grid_bearing_deg
 from urpt_gcs.site.dem import WGS84, open_dem, planning_crs
 from urpt_gcs.site.reading import read_terrain
-from urpt_gcs.site.targets import Target, read_targets
+from urpt_gcs.site.targets import read_targets
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import in_frame, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
@@ -86,220 +85,24 @@ HEADING_TOLERANCE_DEG = 5.0
 CRUISE_BAND_M = 0.5
 # Terrain read around the points, so bilinear samples at the edge exist.
 TERRAIN_MARGIN_M = 10.0
-# What a replay checks when neither the mission nor a flag says.
-DEFAULT_FOV_DEG = 30.0
-DEFAULT_MIN_CLEARANCE_M = 10.0
-# A summary's stop describes a waypoint if they agree to this (both on MAVLink's 1e-7 grid).
-SAME_PLACE_DEG = 1e-9
-SUMMARY_FILE = "summary.json"
 
 
-@dataclass(frozen=True, slots=True)
-class Expected:
-    """What a replay judges, and where that came from.
-
-    Attributes
-    ----------
-    fov_deg
-        Camera half-angle from nadir.
-    min_clearance_m
-        Least height above the terrain the cruise legs must keep.
-    targets
-        The targets to be photographed with their positions, or None: by ``names``.
-    names
-        The names of the targets, to be found in the target file; None with ``targets``
-        None: every target of the file.
-    source
-        Where these came from, for the report (``mission_2.plan, sortie 2 of 3``).
-    warnings
-        Flags that override the mission's, or a summary that does not fit.
-    frame, gsd_cm
-        The plan's frame camera (None: the cone) and the ground resolution it had to reach.
-    band
-        The height band (floor, ceiling above the surface) the plan follows the terrain in,
-        from the summary; None for a plan on one flight plane.
-    """
-
-    fov_deg: float
-    min_clearance_m: float
-    targets: tuple[Target, ...] | None = None
-    names: tuple[str, ...] | None = None
-    source: str = "--fov and --min-clearance, every target of --targets"
-    warnings: tuple[str, ...] = ()
-    frame: Frame | None = None
-    gsd_cm: float | None = None
-    band: tuple[float, float] | None = None
-
-
-def expected_checks(
-    plan_path: Path, mission: Mission, fov_deg: float | None, min_clearance_m: float | None
-) -> Expected:
-    """What a replay of ``plan_path`` checks; see the module docstring.
-
-    Parameters
-    ----------
-    plan_path
-        The mission file, as read into ``mission``.
-    mission
-        Its mission, to tell whether a ``summary.json`` beside it describes it.
-    fov_deg, min_clearance_m
-        ``--fov`` and ``--min-clearance`` if given, else None.
-
-    Raises
-    ------
-    MissionFileError
-        If a plan's ``urptGcs`` key is not usable.
-    """
-    warnings: list[str] = []
-    if plan_path.suffix.lower() == ".plan":
-        check = read_replay_check(plan_path.read_text(encoding="utf-8"), str(plan_path))
-        if check is None:
-            planned = None
-        else:
-            planned = (check.fov_deg, check.min_clearance_m)
-            where = f"{plan_path.name}, sortie {check.sortie} of {check.sorties}"
-            targets: tuple[Target, ...] | None = check.targets
-            names: tuple[str, ...] | None = None
-            camera = (check.frame, check.gsd_cm)
-    else:
-        planned, where, names, targets = _from_summary(plan_path, mission, warnings)
-        camera = _camera_from_summary(plan_path) if planned is not None else (None, None)
-    band = _band_from_summary(plan_path, mission, warnings)
-    if planned is None:
-        return Expected(
-            fov_deg if fov_deg is not None else DEFAULT_FOV_DEG,
-            min_clearance_m if min_clearance_m is not None else DEFAULT_MIN_CLEARANCE_M,
-            warnings=tuple(warnings),
-            band=band,
-        )
-    fov, clearance = planned
-    for flag, given, value, unit in (
-        ("--fov", fov_deg, fov, " deg"),
-        ("--min-clearance", min_clearance_m, clearance, " m"),
-    ):
-        if given is not None and given != value:
-            warnings.append(
-                f"{flag} {given:g}{unit} overrides the {value:g}{unit} {plan_path.name} was "
-                "planned for"
-            )
-    return Expected(
-        fov_deg if fov_deg is not None else fov,
-        min_clearance_m if min_clearance_m is not None else clearance,
-        targets,
-        names,
-        where,
-        tuple(warnings),
-        *camera,
-        band=band,
-    )
-
-
-def _sortie_number(path: Path) -> int | None:
-    """The sortie a mission file is by its name: ``mission`` 1, ``mission_<k>`` k."""
-    stem = path.stem
-    if stem == "mission":
-        return 1
-    if stem.startswith("mission_") and stem[len("mission_") :].isdigit():
-        return int(stem[len("mission_") :])
-    return None
-
-
-def _describes(stops: list[tuple[float, float]], mission: Mission) -> bool:
-    """Whether a summary's stops of a sortie are the mission's photo waypoints."""
-    flown = photo_positions(mission)
-    return len(stops) == len(flown) and all(
-        abs(a - c) <= SAME_PLACE_DEG and abs(b - d) <= SAME_PLACE_DEG
-        for (a, b), (c, d) in zip(stops, flown, strict=True)
-    )
-
-
-def _band_from_summary(
-    path: Path, mission: Mission, warnings: list[str]
-) -> tuple[float, float] | None:
-    """The height band of the ``summary.json`` beside a mission file, if it describes it."""
-    summary_path = path.parent / SUMMARY_FILE
-    number = _sortie_number(path)
-    if number is None or not summary_path.is_file():
-        return None
-    try:
-        data: Any = json.loads(summary_path.read_text(encoding="utf-8"))
-        band = band_of_summary(data)
-        if band is None:
-            return None
-        stops = [
-            (float(s["lat_deg"]), float(s["lon_deg"]))
-            for s in data["stops"]
-            if s["sortie"] == number
-        ]
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        warnings.append(
-            f"'{summary_path}' names no usable height band ({exc}): the track is not judged "
-            "against one"
-        )
-        return None
-    if not _describes(stops, mission):
-        return None
-    return band
-
-
-def _camera_from_summary(path: Path) -> tuple[Frame | None, float | None]:
-    """The frame camera a ``summary.json`` names (None, None for the cone)."""
-    try:
-        data: Any = json.loads((path.parent / SUMMARY_FILE).read_text(encoding="utf-8"))
-        camera = data.get("camera")
-        if camera is None:
-            return None, None
-        w, h = (float(v) for v in camera["sensor_mm"])
-        iw, ih = (int(v) for v in camera["image_px"])
-        frame = Frame(w, h, float(camera["focal_mm"]), iw, ih)
-        gsd = camera.get("gsd_cm_required")
-        return frame, None if gsd is None else float(gsd)
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
-        return None, None
-
-
-def _from_summary(
-    path: Path, mission: Mission, warnings: list[str]
-) -> tuple[tuple[float, float] | None, str, tuple[str, ...] | None, None]:
-    """The camera, clearance and target names for a .waypoints from the summary beside it."""
-    summary_path = path.parent / SUMMARY_FILE
-    number = _sortie_number(path)
-    if not summary_path.is_file() or number is None:
-        return None, "", None, None
-    fallback = "checking every target of --targets at --fov instead: plan again to fix it"
-    try:
-        data: Any = json.loads(summary_path.read_text(encoding="utf-8"))
-        stops = [s for s in data["stops"] if s["sortie"] == number]
-        placed = [(float(s["lat_deg"]), float(s["lon_deg"])) for s in stops]
-        names = tuple(dict.fromkeys(str(n) for s in stops for n in s["sees"]))
-        planned = (float(data["fov_deg"]), float(data.get("min_clearance_m", math.nan)))
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        warnings.append(f"'{summary_path}' is not a summary urpt-gcs wrote ({exc}); {fallback}")
-        return None, "", None, None
-    # The summary's stops are the photo waypoints: a band plan's missions also fly through
-    # waypoints without a photo that follow the terrain.
-    if not _describes(placed, mission):
-        warnings.append(
-            f"'{summary_path}' does not describe {path.name} (its sortie {number} has other "
-            f"stops); {fallback}"
-        )
-        return None, "", None, None
-    if not math.isfinite(planned[1]):
-        planned = (planned[0], DEFAULT_MIN_CLEARANCE_M)
-    sorties = len(data.get("sorties", [])) or 1
-    return planned, f"{SUMMARY_FILE} for {path.name}, sortie {number} of {sorties}", names, None
+# What a report judged on when it does not say (frozen: one instance serves all).
+_UNSTATED = Expected(DEFAULT_FOV_DEG, DEFAULT_MIN_CLEARANCE_M)
 
 
 @dataclass(frozen=True, slots=True)
 class TargetSeen:
     """Which photo saw a target (``photo`` None if none did), and why not if not; ``plan``
-    names the flight the photo is from when several are judged together."""
+    names the flight the photo is from when several are judged together; ``unplanned`` says
+    a target of the file the plan was not made for ("extra") or put elsewhere ("moved")."""
 
     name: str
     photo: int | None
     offset_m: float | None
     reason: str = ""
     plan: str = ""
+    unplanned: Unplanned = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -312,7 +115,7 @@ class ReplayReport:
     min_clearance_m: float | None
     required_clearance_m: float
     problems: tuple[str, ...]
-    expected: Expected = Expected(DEFAULT_FOV_DEG, DEFAULT_MIN_CLEARANCE_M)
+    expected: Expected = _UNSTATED
     home_amsl_m: float = 0.0
     # A band plan's track against its band (None: a plan on one flight plane).
     band: BandTrack | None = None
@@ -338,23 +141,6 @@ def _site(
     return info, crs, pyproj.Transformer.from_crs(WGS84, crs, always_xy=True)
 
 
-def _chosen(expected: Expected, targets_path: Path, problems: list[str]) -> list[Target]:
-    """The targets ``expected`` names: its own, the file's by name, or the file's all."""
-    if expected.targets is not None:
-        return list(expected.targets)
-    every = read_targets(targets_path).targets
-    if expected.names is None:
-        return list(every)
-    by_name = {t.name: t for t in every}
-    missing = [n for n in expected.names if n not in by_name]
-    problems.extend(
-        f"target {name} of {expected.source} is not in '{targets_path}': give the target "
-        "file the plan was made from"
-        for name in missing
-    )
-    return [by_name[n] for n in expected.names if n in by_name]
-
-
 def judge(
     flight: Flight,
     mission: Mission,
@@ -362,10 +148,15 @@ def judge(
     targets_path: Path,
     expected: Expected,
     plan_name: str,
+    every_target: bool = False,
 ) -> ReplayReport:
-    """Check a flight's photos and track against the DEM; see the module docstring."""
+    """Check a flight's photos and track against the DEM; see the module docstring.
+
+    With ``every_target``, a plan's only sortie is judged on every target of
+    ``targets_path`` too (:func:`~urpt_gcs.replay.expected.chosen_targets`).
+    """
     problems: list[str] = []
-    targets = _chosen(expected, targets_path, problems)
+    targets, unplanned = chosen_targets(expected, targets_path, problems, every_target)
     home = (mission.home.lat_deg, mission.home.lon_deg)
     info, crs, to_xy = _site(dem_path, [*((t.lat_deg, t.lon_deg) for t in targets), home])
     target_xy = _xy(to_xy, [t.lat_deg for t in targets], [t.lon_deg for t in targets])
@@ -393,8 +184,21 @@ def judge(
     seen = _targets_seen(
         terrain, [t.name for t in targets], target_xy, ground_t, photo_xy, eye_z, tan, view
     )
-    for row in seen:
-        if row.photo is None:
+    seen = tuple(replace(row, unplanned=unplanned.get(row.name, "")) for row in seen)
+    plan_file = Path(plan_name).name
+    fix = "plan again with this target file, or give the one the plan was made from"
+    for row in (r for r in seen if r.photo is None):
+        if row.unplanned == "extra":
+            problems.append(
+                f"target {row.name} of '{targets_path}' is not one {plan_file} was planned to "
+                f"photograph, and no photo sees it: {fix}"
+            )
+        elif row.unplanned == "moved":
+            problems.append(
+                f"target {row.name} of '{targets_path}' is not where {plan_file} was planned to "
+                f"photograph it, and no photo sees it there: {fix}"
+            )
+        else:
             problems.append(f"target {row.name} was photographed from no position that sees it")
     if expected.band is None:
         cruise = np.array(
@@ -628,7 +432,8 @@ def report_text(report: ReplayReport) -> str:
                 f"    {row.name:<{width}}  photo {row.photo} ({row.offset_m:.1f} m off nadir)"
             )
         else:
-            lines.append(f"    {row.name:<{width}}  NOT SEEN: {row.reason}")
+            why = _UNPLANNED[row.unplanned]
+            lines.append(f"    {row.name:<{width}}  NOT SEEN: {why}{row.reason}")
     if report.min_clearance_m is not None:
         lines.append(
             f"  clearance {report.min_clearance_m:.1f} m least above the terrain on cruise legs "
@@ -639,6 +444,13 @@ def report_text(report: ReplayReport) -> str:
     lines.append(f"  result    {'PASS' if report.ok else 'FAIL'}")
     lines.extend(f"  problem   {problem}" for problem in report.problems)
     return "\n".join(lines)
+
+
+_UNPLANNED = {
+    "": "",
+    "extra": "not a target of the plan; ",
+    "moved": "moved in --targets from where the plan put it; ",
+}
 
 
 def _checks_line(report: ReplayReport) -> str:
@@ -652,9 +464,14 @@ def _checks_line(report: ReplayReport) -> str:
         )
         if expected.gsd_cm is not None:
             camera += f", GSD {expected.gsd_cm:g} cm"
+    extra = sum(r.unplanned == "extra" for r in report.targets)
+    moved = sum(r.unplanned == "moved" for r in report.targets)
+    source = expected.source
+    source += f", {extra} more of --targets" if extra else ""
+    source += f", {moved} where --targets moved {'them' if moved > 1 else 'it'}" if moved else ""
     return (
         f"{len(report.targets)} targets at {camera}, clearance "
-        f"{expected.min_clearance_m:g} m (from {expected.source})"
+        f"{expected.min_clearance_m:g} m (from {source})"
     )
 
 

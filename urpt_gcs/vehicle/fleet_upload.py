@@ -2,7 +2,8 @@
 
 Each vehicle is reached on its own connection (one URL per vehicle, in vehicle order), or all
 of them on one link by their MAVLink system ids. Every mission file is read and checked
-before anything is sent; then each vehicle gets :func:`urpt_gcs.vehicle.link.upload_with_fence`, the
+before anything is sent, each against what the fleet's ``summary.json`` records for its
+vehicle; then each vehicle gets :func:`urpt_gcs.vehicle.link.upload_with_fence`, the
 verified upload with read-back. A vehicle either holds its whole mission, verified, or is
 reported as failed with the reason; one vehicle's failure does not stop the others.
 """
@@ -17,6 +18,7 @@ from pathlib import Path
 from urpt_gcs.errors import SettingsError, UrptError
 from urpt_gcs.files.fleet_folder import FleetFolder, FleetVehicle
 from urpt_gcs.files.mission_file import read_fence, read_mission
+from urpt_gcs.files.plan_check import check_missions
 from urpt_gcs.flight.geofence import Geofence
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.progress import Progress
@@ -27,6 +29,7 @@ __all__ = [
     "FleetUploadReport",
     "VehicleUpload",
     "check_connections",
+    "check_sortie",
     "parse_system_ids",
     "report_lines",
     "upload_fleet",
@@ -106,6 +109,23 @@ def check_connections(
         )
 
 
+def check_sortie(fleet: FleetFolder, sortie: int) -> None:
+    """Refuse a sortie number no vehicle of the fleet flies, before anything is sent: the
+    upload would otherwise skip every vehicle and report none of none verified."""
+    most = max(len(v.missions) for v in fleet.vehicles)
+    if 1 <= sortie <= most:
+        return
+    if most == 1:
+        raise SettingsError(
+            f"--sortie {sortie}: every vehicle of '{fleet.folder}' flies one sortie: give "
+            "--sortie 1, or leave it out"
+        )
+    raise SettingsError(
+        f"--sortie {sortie}: the vehicles of '{fleet.folder}' fly at most {most} sorties: give "
+        f"--sortie 1 to {most}"
+    )
+
+
 def upload_fleet(
     fleet: FleetFolder,
     urls: Sequence[str],
@@ -140,14 +160,16 @@ def upload_fleet(
     Raises
     ------
     SettingsError
-        Before anything is sent: connections that do not match the vehicles, a sortie
-        number below 1, or a mission no vehicle should be given.
+        Before anything is sent: connections that do not match the vehicles, or a sortie
+        number no vehicle flies.
     MissionFileError
-        Before anything is sent, if a vehicle's mission file cannot be read.
+        Before anything is sent, if a vehicle's mission file cannot be read or is not the
+        one the fleet's ``summary.json`` records for it
+        (:func:`urpt_gcs.files.plan_check.check_missions`).
     """
     check_connections(fleet, urls, system_ids)
-    if sortie < 1:
-        raise SettingsError(f"--sortie {sortie} must be 1 or more")
+    check_sortie(fleet, sortie)
+    check_missions(fleet)
     settings = settings or UploadSettings()
     loaded: list[tuple[Mission, Geofence] | None] = []
     for vehicle in fleet.vehicles:
