@@ -18,6 +18,7 @@ INTERRUPTED_EXIT = 130  # 128 + SIGINT, what a shell reports for a command Ctrl-
 REDELIVER_S = 0.05
 
 _interrupted = threading.Event()
+_stopped_by = [int(signal.SIGINT)]
 
 
 def _interrupt_again(unraisable: Any, previous: Any = sys.unraisablehook) -> None:
@@ -41,6 +42,9 @@ def _on_interrupt(signum: int, frame: Any) -> None:
     # Remember the Ctrl-C: a library caught in the middle may turn it into an error of its own
     # (numba, interrupted while it compiles, raises "no compiled object yet").
     _interrupted.set()
+    # SIGTERM stops the run the way Ctrl-C does (outputs undone, worker processes stopped,
+    # one line), and the exit status says which it was.
+    _stopped_by[0] = signum
     raise KeyboardInterrupt
 
 
@@ -63,17 +67,20 @@ def _leave_interrupted() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
     finally:
-        os._exit(INTERRUPTED_EXIT)
+        os._exit(128 + _stopped_by[0])
 
 
 __all__ = ["run"]
 
 
 def run() -> None:
-    """Run the command line on ``sys.argv``; Ctrl-C at any moment exits 130 with one line."""
+    """Run the command line on ``sys.argv``; Ctrl-C at any moment exits 130 with one line,
+    SIGTERM 143."""
     sys.unraisablehook = _interrupt_again
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_interrupt)
+    if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _on_interrupt)
     try:
         # The command line loads after the Ctrl-C handler is in place.
         from urpt_gcs.cli import main
@@ -82,6 +89,10 @@ def run() -> None:
     except SystemExit as exc:
         if exc.code == INTERRUPTED_EXIT:
             _leave_interrupted()
+        # The command has ended and said so: a signal now, while the interpreter shuts down,
+        # would kill the process silently with a status that belies what was done.
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, signal.SIG_IGN)
         raise
     except KeyboardInterrupt:
         # Imports are not done yet (or click is unwinding): print without click.

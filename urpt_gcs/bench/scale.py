@@ -12,8 +12,6 @@ yet another fresh process so no block cache helps) is the floor the terrain stag
 from __future__ import annotations
 
 import math
-import multiprocessing
-import queue as queue_module
 import resource
 import tempfile
 import time
@@ -32,6 +30,7 @@ from rasterio.transform import Affine
 
 from urpt_gcs.batch.table import rows_csv
 from urpt_gcs.errors import OutputError, SettingsError, UrptError
+from urpt_gcs.processes import WorkerDied, run_owned
 
 __all__ = [
     "BASE_M",
@@ -280,30 +279,29 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _plan_child(dem: str, targets: str, options: dict[str, Any], out: Any) -> None:
+def _plan_child(job: tuple[str, str, dict[str, Any]]) -> dict[str, Any]:
     # A fresh process per plan, so its peak memory is the plan's own: the planner loads here.
     from urpt_gcs.pipeline.planner import plan
     from urpt_gcs.pipeline.settings import PlanSettings
 
+    dem, targets, options = job
     start = time.perf_counter()
     try:
         result = plan(Path(dem), Path(targets), PlanSettings(**options))
     except UrptError as exc:
-        out.put({"status": f"refused: {exc}", "wall_s": time.perf_counter() - start})
+        got = {"status": f"refused: {exc}", "wall_s": time.perf_counter() - start}
     except MemoryError as exc:
-        out.put({"status": f"crashed: MemoryError {exc}", "wall_s": time.perf_counter() - start})
+        got = {"status": f"crashed: MemoryError {exc}", "wall_s": time.perf_counter() - start}
     else:
-        out.put(
-            {
-                "status": "ok",
-                "wall_s": time.perf_counter() - start,
-                "timings_s": dict(result.timings_s),
-                "windows": [tuple(w) for w in _read_windows(result.terrain)],
-                "viewpoints": result.instance.n_viewpoints,
-                "tour_m": float(result.tour.length),
-            }
-        )
-    out.put({"peak_rss_mb": _peak_rss_mb()})
+        got = {
+            "status": "ok",
+            "wall_s": time.perf_counter() - start,
+            "timings_s": dict(result.timings_s),
+            "windows": [tuple(w) for w in _read_windows(result.terrain)],
+            "viewpoints": result.instance.n_viewpoints,
+            "tour_m": float(result.tour.length),
+        }
+    return {**got, "peak_rss_mb": _peak_rss_mb()}
 
 
 def _read_windows(terrain: Any) -> list[tuple[int, int, int, int]]:
@@ -323,29 +321,13 @@ def _read_windows(terrain: Any) -> list[tuple[int, int, int, int]]:
     return out
 
 
-def _read_child(dem: str, windows: list[tuple[int, int, int, int]], out: Any) -> None:
+def _read_child(job: tuple[str, list[tuple[int, int, int, int]]]) -> float:
+    dem, windows = job
     start = time.perf_counter()
     with rasterio.open(dem) as src:
         for col, row, width, height in windows:
             src.read(1, window=rasterio.windows.Window(col, row, width, height))
-    out.put(time.perf_counter() - start)
-
-
-def _in_child(target: Callable[..., None], *args: Any) -> list[Any]:
-    ctx = multiprocessing.get_context("spawn")
-    queue = ctx.Queue()
-    proc = ctx.Process(target=target, args=(*args, queue))
-    proc.start()
-    got: list[Any] = []
-    while proc.is_alive() or not queue.empty():
-        try:
-            got.append(queue.get(timeout=0.5))
-        except queue_module.Empty:
-            continue
-    proc.join()
-    if proc.exitcode != 0:
-        got.append({"status": f"crashed: exit code {proc.exitcode}"})
-    return got
+    return time.perf_counter() - start
 
 
 # The stages whose work grows with the area the cones cover, beside the reading itself.
@@ -390,15 +372,15 @@ def run_scale(
             say(f"generating {size_px} x {size_px} px with {count} targets")
             site = make_scale_site(Path(tmp), size_px, count, seed)
             say(f"planning {count} targets")
-            got = _in_child(
-                _plan_child, str(site.dsm_path), str(site.targets_path), plan_options or {}
-            )
-            result: dict[str, Any] = {}
-            for item in got:
-                result.update(item)
+            job = (str(site.dsm_path), str(site.targets_path), plan_options or {})
+            try:
+                result = run_owned(_plan_child, [job], 1)[0]
+            except WorkerDied as exc:
+                result = {"status": f"crashed: {exc}"}
             read_s = None
             if result.get("status") == "ok":
-                read_s = float(_in_child(_read_child, str(site.dsm_path), result["windows"])[0])
+                read_job = (str(site.dsm_path), result["windows"])
+                read_s = float(run_owned(_read_child, [read_job], 1)[0])
             timings = result.get("timings_s", {})
             stages = sum(timings.get(k, 0.0) for k in TERRAIN_STAGES) if timings else None
             row = ScaleRow(

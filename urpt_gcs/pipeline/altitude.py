@@ -14,10 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +25,7 @@ from urpt_gcs.pipeline.options import FLAGS
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.result import AltitudePoint, AltitudeSweep, Plan
 from urpt_gcs.pipeline.settings import PlanSettings
+from urpt_gcs.processes import run_owned
 from urpt_gcs.progress import Progress
 
 # Altitudes planned by default, the lowest and highest included.
@@ -132,10 +131,8 @@ def best_altitude(
     ]
     workers = min(processes or os.cpu_count() or 1, max(len(jobs), 1))
     if jobs and workers > 1:
-        # Spawned, not forked: the parent holds threads (numba, the progress line).
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            points += list(pool.map(_plan_at, jobs))
+        # Processes this one owns: none outlives a Ctrl-C or SIGTERM, none prints its own.
+        points += run_owned(_plan_at, jobs, workers)
     else:
         points += [_plan_at(job) for job in jobs]
     flown = [p for p in points if p.flight_time_s is not None]

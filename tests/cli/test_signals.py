@@ -1,0 +1,122 @@
+"""Ctrl-C and SIGTERM at random moments of a plan that runs worker processes.
+
+``plan --altitude auto`` plans the lowest plane here, then the other altitudes in worker
+processes. Each round starts it in a session of its own, sends SIGINT to the whole group (as a
+terminal's Ctrl-C does) or SIGTERM to the main process alone or to the group, at a random
+moment (from the start, or once the workers run), and checks the four things an operator
+depends on: one line and no traceback from any process, the exit status of the signal, no
+process of the session left running, and no leaked semaphore reported.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from conftest import DEMO
+
+ROUNDS = 8
+# Each round must end within this after its signal; a hang fails instead of blocking.
+END_WITHIN_S = 90.0
+# The stage line printed as the workers start.
+WORKERS_START = "... planning the lowest plane"
+
+
+def _session(sid: int) -> list[int]:
+    """Live processes of session ``sid`` (zombies left out: they hold no resources)."""
+    found = []
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{name}/stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if fields[0] != "Z" and int(fields[3]) == sid:
+            found.append(int(name))
+    return found
+
+
+def _round(rng: random.Random, mode: str, at_workers: bool, out: Path) -> None:
+    args = [
+        sys.executable,
+        "-m",
+        "urpt_gcs",
+        "plan",
+        "--dem",
+        str(DEMO / "site.tif"),
+        "--targets",
+        str(DEMO / "targets.kml"),
+        "--out",
+        str(out),
+        "--altitude",
+        "auto",
+        "--altitude-steps",
+        "4",
+        "--no-map",
+    ]
+    # stderr to a file: a process that outlives the plan would hold a pipe open for ever.
+    errors = out.with_name(out.name + ".stderr")
+    with errors.open("w") as sink:
+        child = subprocess.Popen(
+            args, stdout=subprocess.PIPE, stderr=sink, text=True, start_new_session=True
+        )
+    started = threading.Event()
+    lines: list[str] = []
+
+    def read() -> None:
+        assert child.stdout is not None
+        for line in child.stdout:
+            lines.append(line)
+            if line.startswith(WORKERS_START):
+                started.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        if at_workers:
+            started.wait(END_WITHIN_S)
+            time.sleep(rng.uniform(0.0, 3.0))
+        else:
+            time.sleep(rng.uniform(0.3, 6.0))
+        if mode == "SIGINT to the group":
+            os.killpg(child.pid, signal.SIGINT)
+        elif mode == "SIGTERM to the main process":
+            os.kill(child.pid, signal.SIGTERM)
+        else:
+            os.killpg(child.pid, signal.SIGTERM)
+        try:
+            child.wait(END_WITHIN_S)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"{mode}: the plan still ran {END_WITHIN_S:g} s after the signal")
+        reader.join(10.0)
+        stderr = errors.read_text()
+        time.sleep(0.5)  # a killed child's exit reaches /proc a moment later
+        left = _session(child.pid)
+    finally:
+        if _session(child.pid):
+            os.killpg(child.pid, signal.SIGKILL)
+    what = f"{mode}, {'once the workers ran' if at_workers else 'from the start'}"
+    assert "Traceback" not in stderr, f"{what}: {stderr}"
+    assert "leaked semaphore" not in stderr, f"{what}: {stderr}"
+    assert left == [], f"{what}: processes {left} outlived the plan"
+    if child.returncode == 0:
+        return  # it finished before the signal landed
+    expected = 130 if mode.startswith("SIGINT") else 143
+    assert child.returncode == expected, f"{what}: exit {child.returncode}, {stderr}"
+    assert stderr.strip().splitlines() == ["urpt-gcs: interrupted"], f"{what}: {stderr}"
+
+
+def test_signals_at_random_moments_leave_one_line_and_no_process(tmp_path: Path) -> None:
+    rng = random.Random(41)
+    modes = ["SIGINT to the group", "SIGTERM to the main process", "SIGTERM to the group"]
+    for n in range(ROUNDS):
+        _round(rng, modes[n % 3], at_workers=n % 2 == 1, out=tmp_path / f"out{n}")
