@@ -120,3 +120,77 @@ def test_signals_at_random_moments_leave_one_line_and_no_process(tmp_path: Path)
     modes = ["SIGINT to the group", "SIGTERM to the main process", "SIGTERM to the group"]
     for n in range(ROUNDS):
         _round(rng, modes[n % 3], at_workers=n % 2 == 1, out=tmp_path / f"out{n}")
+
+
+def _start(args: list[str], out: Path, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    """``python -m urpt_gcs ARGS`` in a session of its own, stdout and stderr to files."""
+    with out.with_suffix(".stdout").open("w") as so, out.with_suffix(".stderr").open("w") as se:
+        return subprocess.Popen(
+            [sys.executable, "-m", "urpt_gcs", *args],
+            stdout=so,
+            stderr=se,
+            text=True,
+            start_new_session=True,
+            env=env,
+        )
+
+
+def _stopped(child: subprocess.Popen[str], out: Path) -> str:
+    """SIGTERM to the main process alone; its stderr once it and its session have ended."""
+    os.kill(child.pid, signal.SIGTERM)
+    try:
+        child.wait(END_WITHIN_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(child.pid, signal.SIGKILL)
+        pytest.fail(f"still running {END_WITHIN_S:g} s after SIGTERM")
+    time.sleep(0.5)
+    left = _session(child.pid)
+    if left:
+        os.killpg(child.pid, signal.SIGKILL)
+    assert left == [], f"processes {left} outlived the command"
+    return out.with_suffix(".stderr").read_text()
+
+
+def _wait_for(what: str, found: object, within_s: float = END_WITHIN_S) -> None:
+    deadline = time.monotonic() + within_s
+    while not (found() if callable(found) else found):
+        if time.monotonic() > deadline:
+            pytest.fail(f"{what} did not happen within {within_s:g} s")
+        time.sleep(0.2)
+
+
+def test_a_batch_stopped_by_sigterm_writes_its_results(tmp_path: Path) -> None:
+    # Before, SIGTERM left the job folders it had committed and no batch.csv.
+    altitudes = ", ".join(str(480 + 5 * k) for k in range(12))
+    jobs = tmp_path / "jobs.toml"
+    jobs.write_text(
+        f'[plan]\ntime-limit = 1\nno-map = true\n[[site]]\nname = "demo"\n'
+        f'dem = "{DEMO / "site.tif"}"\ntargets = "{DEMO / "targets.kml"}"\n'
+        f"[site.sweep]\naltitude = [{altitudes}]\n"
+    )
+    out = tmp_path / "out"
+    child = _start(["batch", str(jobs), "--out", str(out), "--workers", "2"], tmp_path / "run")
+    log = tmp_path / "run.stdout"
+    _wait_for("the first job's end", lambda: "[1/12]" in log.read_text())
+    stderr = _stopped(child, tmp_path / "run")
+    if child.returncode == 0:
+        return  # every job ended before the signal
+    assert child.returncode == 143, stderr
+    assert stderr.strip().splitlines() == ["urpt-gcs: interrupted"], stderr
+    rows = (out / "batch.csv").read_text().splitlines()
+    assert len(rows) == 13  # the header and every job, the unfinished ones marked
+    assert any(",ok," in row for row in rows[1:])
+
+
+def test_bench_scale_stopped_by_sigterm_leaves_no_raster(tmp_path: Path) -> None:
+    # Before, SIGTERM left the generated raster in the temporary folder.
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    env = {**os.environ, "TMPDIR": str(scratch)}
+    args = ["bench", "scale", "--targets", "20", "--size", "3000"]
+    child = _start(args, tmp_path / "run", env)
+    _wait_for("the site's raster", lambda: any(scratch.glob("urpt-scale-*/site.tif")))
+    time.sleep(1.0)
+    stderr = _stopped(child, tmp_path / "run")
+    assert child.returncode in (0, 143), stderr
+    assert list(scratch.iterdir()) == [], "the bench left files in the temporary folder"
