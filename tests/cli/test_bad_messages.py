@@ -33,3 +33,23 @@ def test_a_clash_in_altitude_mode_advises_the_layers_not_altitude_mode(
     assert line.endswith("or raise --layer-spacing")
     assert "--separation altitude" not in line
     assert not (tmp_path / "out").exists()
+
+
+def test_a_replay_timeout_under_a_second_is_named_as_given() -> None:
+    # It was printed rounded to whole seconds: "did not land within 0 s".
+    args = [
+        "sitl",
+        "replay",
+        "--dem",
+        str(DEMO / "site.tif"),
+        "--targets",
+        str(DEMO / "targets.kml"),
+        "--plan",
+        str(Path(__file__).resolve().parents[1] / "data" / "demo_plan" / "mission.plan"),
+        "--timeout",
+        "0.5",
+    ]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert "did not land within 0.5 s of wall time" in line

@@ -194,3 +194,36 @@ def test_bench_scale_stopped_by_sigterm_leaves_no_raster(tmp_path: Path) -> None
     stderr = _stopped(child, tmp_path / "run")
     assert child.returncode in (0, 143), stderr
     assert list(scratch.iterdir()) == [], "the bench left files in the temporary folder"
+
+
+def test_ctrl_c_as_the_summary_ends_is_no_silent_kill(tmp_path: Path) -> None:
+    # Before, Ctrl-C while the interpreter shut down killed the process by the signal, with
+    # no line: a status that said the run failed after it had written everything.
+    out = tmp_path / "out"
+    args = [
+        "plan",
+        "--dem",
+        str(DEMO / "site.tif"),
+        "--targets",
+        str(DEMO / "targets.kml"),
+        "--out",
+        str(out),
+        "--no-map",
+        "--time-limit",
+        "0.5",
+    ]
+    child = subprocess.Popen(
+        [sys.executable, "-m", "urpt_gcs", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,
+    )
+    assert child.stdout is not None
+    for line in child.stdout:
+        if line.rstrip().endswith("summary.json"):  # the summary's last line
+            os.killpg(child.pid, signal.SIGINT)
+            break
+    child.stdout.read()
+    assert child.wait(END_WITHIN_S) in (0, 130)
+    assert (out / "summary.json").is_file()
