@@ -21,7 +21,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import DEMO, DEMO_OUT
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from support.fleet_helpers import HOME_EAST, SITE, TARGETS, Vehicle, build_fleet
+from support.fleet_helpers import HOME_EAST, Vehicle, build_fleet, plan_fleet_of_two
 from support.simulated import simulated
 
 from urpt_gcs.cli import main
@@ -84,12 +84,7 @@ def sorties2(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def planned2(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The planner's own fleet of two for the demo (its summary.json as plan writes it)."""
-    out = tmp_path_factory.mktemp("planned2") / "out"
-    args = ["plan", "--dem", str(SITE), "--targets", str(TARGETS), "--out", str(out)]
-    result = CliRunner().invoke(main, [*args, "--vehicles", "2", "--time-limit", "2", "--no-map"])
-    assert result.exit_code == 0, result.output
-    return out
+    return plan_fleet_of_two(tmp_path_factory.mktemp("planned2") / "out")
 
 
 # --- upload --fleet --sortie N: a sortie no vehicle flies -----------------------------------

@@ -14,7 +14,6 @@ from __future__ import annotations
 import csv
 import json
 import shutil
-import zipfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import DEMO
 from lxml import etree  # pymavlink's dependency: a parser other than ours
+from support.targets import write_kmz
 
 from urpt_gcs.cli import main
 from urpt_gcs.files import mapview
@@ -87,13 +87,6 @@ def demo_kml(names: Mapping[int, str | None]) -> bytes:
     return data
 
 
-def demo_kmz(path: Path, members: Mapping[str, bytes]) -> Path:
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
-        for name, data in members.items():
-            archive.writestr(name, data)
-    return path
-
-
 # name: (makes the --targets file in a folder, words the message must contain)
 REFUSED: dict[str, tuple[Callable[[Path], Path], list[str]]] = {
     "name_control_character_csv": (
@@ -131,7 +124,7 @@ REFUSED: dict[str, tuple[Callable[[Path], Path], list[str]]] = {
         ["name_c1_control.kml", "placemark 7", "control character U+0085"],
     ),
     "name_control_character_kmz": (
-        lambda d: demo_kmz(d / "name_control_character.kmz", {"doc.kml": demo_kml({7: "\x7f"})}),
+        lambda d: write_kmz(d / "name_control_character.kmz", {"doc.kml": demo_kml({7: "\x7f"})}),
         ["name_control_character.kmz'", "placemark 8", "control character U+007F"],
     ),
     "duplicate_names_csv": (
@@ -147,7 +140,7 @@ REFUSED: dict[str, tuple[Callable[[Path], Path], list[str]]] = {
         ["null_geometry.geojson", "feature 4 (unnamed)", "no geometry"],
     ),
     "kmz_several_kml": (
-        lambda d: demo_kmz(
+        lambda d: write_kmz(
             d / "kmz_several_kml.kmz",
             {"north.kml": demo_kml({}), "south.kml": demo_kml({}), "files/x.png": b"\x89PNG"},
         ),

@@ -23,7 +23,7 @@ from conftest import DEMO_OUT, SHARED
 from pymavlink import mavutil, mavwp
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from scipy.ndimage import minimum_filter1d
-from support.fleet_helpers import HOME_EAST, SITE, TARGETS, Vehicle, build_fleet
+from support.fleet_helpers import HOME_EAST, SITE, TARGETS, Vehicle, build_fleet, plan_fleet_of_two
 
 from urpt_gcs.cli import main
 from urpt_gcs.files.fleet_folder import read_fleet
@@ -344,12 +344,7 @@ def test_the_replay_command_fails_on_crossing_tracks(crossing: Path) -> None:
 
 @pytest.fixture(scope="module")
 def planned2(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The planner's own fleet of two for the demo: one home, layers 10 m apart."""
-    out = tmp_path_factory.mktemp("planned2") / "out"
-    args = ["plan", "--dem", str(SITE), "--targets", str(TARGETS), "--out", str(out)]
-    result = CliRunner().invoke(main, [*args, "--vehicles", "2", "--time-limit", "2", "--no-map"])
-    assert result.exit_code == 0, result.output
-    return out
+    return plan_fleet_of_two(tmp_path_factory.mktemp("planned2") / "out")
 
 
 def _replay_planned(fleet: Path, settings: ReplaySettings, within_m: float = 1.5) -> list[Flight]:

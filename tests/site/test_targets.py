@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import json
 import time
-import zipfile
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.targets import write_kmz
 
 from urpt_gcs.errors import TargetsError
 from urpt_gcs.site.targets import Target, TargetSet, read_targets
@@ -34,13 +34,6 @@ def _assert_error(path: Path, fragment: str) -> str:
     assert message.startswith(f"targets file '{path}"), message
     assert fragment in message, message
     return message
-
-
-def _kmz(path: Path, members: dict[str, bytes]) -> Path:
-    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
-        for name, data in members.items():
-            archive.writestr(name, data)
-    return path
 
 
 # --- good files ----------------------------------------------------------------------------
@@ -85,7 +78,7 @@ def test_kml_other_namespaces(
 
 def test_kmz_reads_doc_kml(tmp_path: Path) -> None:
     kml = (TARGETS / "nested_folders.kml").read_bytes()
-    path = _kmz(tmp_path / "targets.kmz", {"files/icon.png": b"\x89PNG", "doc.kml": kml})
+    path = write_kmz(tmp_path / "targets.kmz", {"files/icon.png": b"\x89PNG", "doc.kml": kml})
 
     result = read_targets(path)
 
@@ -104,7 +97,7 @@ def test_kmz_reads_doc_kml(tmp_path: Path) -> None:
     ids=["one_in_a_folder", "one_at_the_root", "doc_kml_among_others"],
 )
 def test_kmz_reads_its_one_kml_or_its_root_doc_kml(tmp_path: Path, members: dict[str, str]) -> None:
-    path = _kmz(
+    path = write_kmz(
         tmp_path / "targets.kmz",
         {n: (TARGETS / f"{k}.kml").read_bytes() if k else b"\x89PNG" for n, k in members.items()},
     )
@@ -132,7 +125,7 @@ def test_kmz_with_several_kml_and_no_doc_kml_is_refused(
     tmp_path: Path, members: list[str], fragment: str
 ) -> None:
     kml = (TARGETS / "no_namespace.kml").read_bytes()
-    path = _kmz(tmp_path / "kmz_several_kml.kmz", dict.fromkeys(members, kml))
+    path = write_kmz(tmp_path / "kmz_several_kml.kmz", dict.fromkeys(members, kml))
 
     _assert_error(path, fragment)
 
@@ -285,7 +278,7 @@ def test_external_entity_is_not_resolved() -> None:
 
 
 def test_kmz_without_kml(tmp_path: Path) -> None:
-    path = _kmz(
+    path = write_kmz(
         tmp_path / "kmz_without_kml.kmz", {"files/icon.png": b"\x89PNG", "readme.txt": b"hi"}
     )
 
@@ -294,7 +287,7 @@ def test_kmz_without_kml(tmp_path: Path) -> None:
 
 def test_kmz_with_malformed_kml_names_the_member(tmp_path: Path) -> None:
     kml = (BAD / "kml_malformed.kml").read_bytes()
-    path = _kmz(tmp_path / "targets.kmz", {"doc.kml": kml})
+    path = write_kmz(tmp_path / "targets.kmz", {"doc.kml": kml})
 
     _assert_error(path, "targets.kmz!doc.kml' is not well-formed XML")
 
@@ -391,7 +384,7 @@ def test_a_name_no_output_can_hold_is_refused_in_every_format(
 
 def test_a_kmz_name_is_checked_as_its_kml(tmp_path: Path) -> None:
     kml = _KML_NAME.format("Mast&#x85;").encode()
-    path = _kmz(tmp_path / "targets.kmz", {"doc.kml": kml})
+    path = write_kmz(tmp_path / "targets.kmz", {"doc.kml": kml})
 
     _assert_error(path, "targets.kmz' has point 'Mast\\x85' (placemark 2) whose name holds the")
 
@@ -489,7 +482,7 @@ def test_fuzz_returns_targets_or_raises_targets_error(
     suffix, data = case
     path = tmp_path_factory.mktemp("fuzz") / f"fuzz{suffix}"
     if suffix == ".kmz" and data[:1] == b"<":
-        _kmz(path, {"doc.kml": data})
+        write_kmz(path, {"doc.kml": data})
     else:
         path.write_bytes(data)
 

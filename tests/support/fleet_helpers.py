@@ -95,3 +95,12 @@ def _write_targets(path: Path, targets: list[Target]) -> None:
         writer = csv.writer(f)
         writer.writerow(["name", "lat", "lon"])
         writer.writerows([t.name, f"{t.lat_deg:.9f}", f"{t.lon_deg:.9f}"] for t in targets)
+
+
+def plan_fleet_of_two(out: Path) -> Path:
+    """The planner's own fleet of two for the demo, written to ``out``: one home, layers
+    10 m apart (its summary.json as plan writes it)."""
+    args = ["plan", "--dem", str(SITE), "--targets", str(TARGETS), "--out", str(out)]
+    result = CliRunner().invoke(main, [*args, "--vehicles", "2", "--time-limit", "2", "--no-map"])
+    assert result.exit_code == 0, result.output
+    return out

@@ -3,6 +3,8 @@ valid ground of a raster."""
 
 from __future__ import annotations
 
+import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,14 @@ REAL_CASES = [
     ("pysheds_dem_wgs84.tif", 8, 2000.0),
     ("dsm2dtm_drone_dsm_wgs84.tif", 6, None),
 ]
+
+
+def write_kmz(path: Path, members: Mapping[str, bytes]) -> Path:
+    """A KMZ (a zip) at ``path`` holding ``members`` (name in the archive -> bytes)."""
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    return path
 
 
 def kml_targets(path: Path) -> list[tuple[str, float, float]]:
