@@ -6,7 +6,7 @@ order. What it guarantees, where a pool does not:
 
 - **Ctrl-C reaches the parent alone.** A terminal's Ctrl-C goes to the whole process group;
   a child that took it would print its own traceback. Each child is started with SIGINT
-  blocked, a mask it keeps through ``exec``, so it never runs a Python handler for it.
+  ignored, which it keeps through ``exec``, so it never runs a Python handler for it.
 - **No child outlives the call.** Whatever leaves the call (a result, an error, Ctrl-C,
   SIGTERM raised as KeyboardInterrupt by the program's handler) first terminates every child
   still running, waits for it, and kills one that lingers.
@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+import threading
 import traceback
 from collections.abc import Callable, Sequence
 from multiprocessing.connection import Connection, wait
@@ -101,11 +102,19 @@ def run_owned(func: Callable[[J], R], jobs: Sequence[J], workers: int) -> list[R
 
 
 def _start_without_sigint(child: Any) -> None:
-    # The child inherits the blocked mask through fork and exec; the parent's own Ctrl-C
-    # stays pending for the moment of the start and is delivered when it is unblocked.
+    if threading.current_thread() is not threading.main_thread():
+        child.start()  # only the main thread may change a signal's disposition
+        return
+    # An ignored signal stays ignored through exec (a blocked mask does not: the start
+    # clears it). This thread blocks SIGINT meanwhile, so that a Ctrl-C in the moment of
+    # the start waits for the parent's own handler instead of being ignored.
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        child.start()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            child.start()
+        finally:
+            signal.signal(signal.SIGINT, previous)
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
