@@ -12,6 +12,7 @@ PUBLIC = {
     "DemError",
     "FleetPlan",
     "FleetSettings",
+    "IdleVehicle",
     "JobsFileError",
     "LinkError",
     "Mission",

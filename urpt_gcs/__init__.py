@@ -49,7 +49,7 @@ __version__ = "0.1.0"
 if TYPE_CHECKING:
     from urpt_gcs.files.write import write_outputs
     from urpt_gcs.flight.mission import Mission, MissionSettings
-    from urpt_gcs.pipeline.fleet import FleetPlan, plan_fleet
+    from urpt_gcs.pipeline.fleet import FleetPlan, IdleVehicle, plan_fleet
     from urpt_gcs.pipeline.planner import plan
     from urpt_gcs.pipeline.result import Plan
     from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, VehicleSpec
@@ -64,6 +64,7 @@ _LAZY = {
     "upload": "urpt_gcs.vehicle.link",
     "Plan": "urpt_gcs.pipeline.result",
     "FleetPlan": "urpt_gcs.pipeline.fleet",
+    "IdleVehicle": "urpt_gcs.pipeline.fleet",
     "PlanSettings": "urpt_gcs.pipeline.settings",
     "FleetSettings": "urpt_gcs.pipeline.settings",
     "VehicleSpec": "urpt_gcs.pipeline.settings",
@@ -80,6 +81,7 @@ __all__ = [
     "DemError",
     "FleetPlan",
     "FleetSettings",
+    "IdleVehicle",
     "JobsFileError",
     "LinkError",
     "Mission",

@@ -501,3 +501,57 @@ def test_a_fleet_file_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
     fleet = tmp_path / "fleet.toml"
     fleet.write_bytes(b"\xef\xbb\xbf[[vehicle]]\nspeed_m_s = 6.0\n\n[[vehicle]]\n")
     assert [v.speed_m_s for v in read_fleet(fleet)] == [6.0, None]
+
+
+def test_a_vehicle_too_slow_to_help_stays_on_the_ground(tmp_path: Path) -> None:
+    """A fleet whose second vehicle flies 0.1 m/s was refused ("no split ... fits") though
+    the first alone flies the site: now the first flies every target, the second is left
+    idle with the reason in the summary and no mission, and the fleet lands no later than
+    the first vehicle planned alone."""
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text("[[vehicle]]\n\n[[vehicle]]\nspeed_m_s = 0.1\n")
+    out = tmp_path / "out"
+    base = [
+        "plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml"),
+        "--no-map", "--time-limit", "2",
+    ]  # fmt: skip
+    result = CliRunner().invoke(main, [*base, "--out", str(out), "--fleet", str(fleet)])
+    assert result.exit_code == 0, result.output
+    data = json.loads((out / "summary.json").read_text())
+    first, second = data["fleet"]["vehicles"]
+    names = [name for name, _, _ in _demo_targets()]
+    assert sorted(first["targets"] + second["targets"]) == sorted(names)
+    assert not first["idle"] and first["targets"]
+    assert second["idle"] is True and second["targets"] == [] and second["sorties"] == 0
+    assert second["speed_m_s"] == 0.1 and "0.1 m/s" in second["idle_reason"]
+    assert second["start_delay_s"] == 0.0
+    assert list((out / "vehicle_2").iterdir()) == []
+    assert "vehicle 2 stays on the ground: at 0.1 m/s" in result.output
+    # The flying vehicle's missions, checked independently, see every target.
+    flying = {**data, "fleet": {**data["fleet"], "vehicles": [first]}}
+    _check_fleet_folder(out, DEMO / "site.tif", _demo_targets(), flying, 10.0)
+    # The first vehicle planned alone, with the same time limit. The fleet's single tour
+    # gets only part of that limit, hence a little room.
+    alone = CliRunner().invoke(main, [*base, "--out", str(tmp_path / "alone"), "--quiet"])
+    assert alone.exit_code == 0, alone.output
+    alone_s = json.loads((tmp_path / "alone" / "summary.json").read_text())["flight_time_s"]
+    assert data["fleet"]["makespan_s"] <= alone_s * 1.01
+
+
+def test_a_fleet_that_cannot_reach_a_target_is_refused_in_one_line(tmp_path: Path) -> None:
+    """No vehicle reaches any target and back within half a minute: no share fits."""
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text("[[vehicle]]\nendurance_min = 0.5\n\n[[vehicle]]\nendurance_min = 0.5\n")
+    result = CliRunner().invoke(
+        main,
+        [
+            "plan", "--dem", str(DEMO / "site.tif"), "--targets", str(DEMO / "targets.kml"),
+            "--out", str(tmp_path / "out"), "--fleet", str(fleet), "--no-map", "--quiet",
+        ],
+    )  # fmt: skip
+    assert result.exit_code == 1
+    line = result.stderr.strip()
+    assert "\n" not in line and line.startswith("urpt-gcs: error: no split of the targets")
+    assert "none of vehicles 1, 2 can fly to target 'T01 north gate'" in line
+    assert "raise the endurance in --fleet" in line
+    assert not (tmp_path / "out").exists()

@@ -5,6 +5,8 @@ targets, sorties and the SHA-256 of each of its mission files, and how the vehic
 apart); ``OUT/vehicle_k/`` holds exactly what a single-vehicle plan writes. :func:`read_fleet`
 reads the block and finds each vehicle's mission files; upload and replay work from what it
 returns. A summary written before the digests were recorded has none, and reads the same.
+A vehicle the plan left idle (``"idle": true``) has no targets, no sorties and no mission
+files; upload and replay pass it by.
 """
 
 from __future__ import annotations
@@ -64,6 +66,8 @@ class FleetVehicle:
     mission_sha256
         (file name, SHA-256 in hex) of each mission file as the plan wrote it; empty for a
         summary written before these were recorded.
+    idle
+        The plan gives it nothing to fly (``missions`` and ``targets`` are empty).
     """
 
     number: int
@@ -75,6 +79,7 @@ class FleetVehicle:
     start_delay_s: float = 0.0
     sorties_planned: int | None = None
     mission_sha256: tuple[tuple[str, str], ...] = ()
+    idle: bool = False
 
     @property
     def name(self) -> str:
@@ -166,6 +171,13 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
         raise MissionFileError(f'{where}: vehicle {number}\'s "targets" is not a list of names')
     sub = folder / name
     missions = _missions(sub)
+    idle = row.get("idle", False)
+    if not isinstance(idle, bool):
+        raise MissionFileError(
+            f'{where}: vehicle {number}\'s "idle" is {idle!r}, not true or false'
+        )
+    if idle:
+        return _idle_vehicle(number, sub, missions, altitude, targets, where)
     if not missions:
         raise MissionFileError(
             f"vehicle {number}'s folder '{sub}' holds no mission.plan or mission_N.plan: plan "
@@ -198,6 +210,29 @@ def _vehicle(folder: Path, row: Any, index: int, where: str) -> FleetVehicle:
         sorties,
         _digests(row.get("mission_sha256", {}), f"{where}: vehicle {number}'s"),
     )
+
+
+def _idle_vehicle(
+    number: int,
+    sub: Path,
+    missions: tuple[Path, ...],
+    altitude: float,
+    targets: list[str],
+    where: str,
+) -> FleetVehicle:
+    """A vehicle the plan leaves idle: refused if its folder holds a mission or the summary
+    gives it targets, for either is not what this plan flies."""
+    if missions:
+        raise MissionFileError(
+            f"{where}: vehicle {number} is idle, yet its folder '{sub}' holds "
+            f"'{missions[0].name}', which this plan does not fly: plan the fleet again"
+        )
+    if targets:
+        raise MissionFileError(
+            f"{where}: vehicle {number} is idle, yet it is given {len(targets)} targets: plan "
+            "the fleet again"
+        )
+    return FleetVehicle(number, sub, (), altitude, (), 0.0, 0.0, 0, (), idle=True)
 
 
 def _digests(value: Any, what: str) -> tuple[tuple[str, str], ...]:

@@ -6,7 +6,9 @@
 start delay and the SHA-256 of each of its mission files as written; the makespan, its lower
 bound and gap; the separation and the planned closest approach), and ``OUT/map.png``,
 ``OUT/plan.kml`` and ``OUT/plan.geojson`` show every vehicle in its own colour. Everything is
-committed as one set: all of it appears, or none.
+committed as one set: all of it appears, or none. A vehicle left idle has ``"idle": true``,
+why in ``"idle_reason"``, no targets, no sorties, and an empty folder (the products of an
+earlier plan in it are removed with the rest of the earlier set).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from urpt_gcs.files.formats.geo import fleet_geojson, fleet_kml
 from urpt_gcs.files.output import Destination, commit
 from urpt_gcs.files.plan_check import mission_digests
 from urpt_gcs.files.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
-from urpt_gcs.pipeline.fleet import FleetPlan
+from urpt_gcs.pipeline.fleet import FleetPlan, IdleVehicle
 
 __all__ = [
     "check_fleet_out",
@@ -64,10 +66,14 @@ def fleet_summary(
     for number, (plan, delay, finish) in enumerate(
         zip(fleet.plans, sep.start_delays_s, fleet.finish_s, strict=True), start=1
     ):
+        if isinstance(plan, IdleVehicle):
+            vehicles.append(_idle_row(plan))
+            continue
         vehicles.append(
             {
                 "vehicle": number,
                 "dir": vehicle_dir(number),
+                "idle": False,
                 "altitude_m": round(plan.camera.altitude_m, 2),
                 "altitude_above_home_m": round(plan.altitude_rel_m, 2),
                 "home_lat": plan.mission.home.lat_deg,
@@ -127,14 +133,38 @@ def fleet_summary(
                 "timing_slack_s": round(sep.timing_slack_s, 1),
             },
         },
-        "targets": sum(len(p.targets.targets) for p in fleet.plans),
+        "targets": sum(len(p.targets.targets) for p in fleet.flying if p is not None),
         "timings_s": {k: round(v, 3) for k, v in fleet.timings_s.items()},
         "warnings": [
             f"vehicle {number}: {w}"
-            for number, plan in enumerate(fleet.plans, start=1)
+            for number, plan in enumerate(fleet.flying, start=1)
+            if plan is not None
             for w in plan.warnings
         ],
         "files": files,
+    }
+
+
+def _idle_row(idle: IdleVehicle) -> dict[str, Any]:
+    """A vehicle left idle as the summary lists it: its layer, home and speed, nothing to fly."""
+    return {
+        "vehicle": idle.number,
+        "dir": vehicle_dir(idle.number),
+        "idle": True,
+        "idle_reason": idle.reason,
+        "altitude_m": round(idle.altitude_m, 2),
+        "altitude_above_home_m": round(idle.altitude_rel_m, 2),
+        "home_lat": idle.home_lat_lon[0],
+        "home_lon": idle.home_lat_lon[1],
+        "speed_m_s": idle.settings.mission.cruise_speed_m_s,
+        "endurance_min": idle.settings.endurance_min,
+        "flight_time_s": 0.0,
+        "start_delay_s": 0.0,
+        "finish_s": 0.0,
+        "length_m": 0.0,
+        "sorties": 0,
+        "stops": 0,
+        "targets": [],
     }
 
 
@@ -149,8 +179,11 @@ def fleet_summary_text(data: dict[str, Any]) -> str:
     sep = f["separation"]
     gap = "no bound" if f["makespan_gap_pct"] is None else f"gap {f['makespan_gap_pct']:.1f} %"
     count = len(f["vehicles"])
+    idle = [v for v in f["vehicles"] if v.get("idle")]
+    flying = f", {count - len(idle)} flying" if idle else ""
     lines = [
-        f"fleet          {count} vehicle{'s' if count != 1 else ''}, {data['targets']} targets",
+        f"fleet          {count} vehicle{'s' if count != 1 else ''}{flying}, "
+        f"{data['targets']} targets",
         f"makespan       {_minutes(f['makespan_s'])} (last landing); lower bound "
         f"{_minutes(f['makespan_bound_s'])}, {gap}",
         f"naive split    {_minutes(f['naive_split_makespan_s'])} (the single-vehicle tour "
@@ -159,6 +192,9 @@ def fleet_summary_text(data: dict[str, Any]) -> str:
         "vehicle  layer (m)  above home  start  flight        length     sorties  targets",
     ]
     for v in f["vehicles"]:
+        if v.get("idle"):
+            lines.append(f"  {v['vehicle']:<6d}{v['altitude_m']:9.1f}  idle: nothing to fly")
+            continue
         names = ", ".join(v["targets"][:5]) + (", ..." if len(v["targets"]) > 5 else "")
         lines.append(
             f"  {v['vehicle']:<6d}{v['altitude_m']:9.1f}{v['altitude_above_home_m']:11.1f} m"
@@ -185,6 +221,10 @@ def fleet_summary_text(data: dict[str, Any]) -> str:
             + ", ".join(f"vehicle {k} {d:g} s" for k, d in delayed)
             + " after the first take-off (to keep the separation)"
         )
+    lines += [
+        f"idle           vehicle {v['vehicle']} stays on the ground: {v['idle_reason']}"
+        for v in idle
+    ]
     lines += [f"warning        {w}" for w in data["warnings"]]
     if data["files"]:
         lines.append("files          " + "\n               ".join(data["files"]))
@@ -202,11 +242,12 @@ def write_fleet_products(
     *folders, top = destinations
     writes: list[tuple[Destination, dict[str, str | bytes]]] = []
     listed: list[str] = []
-    for plan, dest in zip(fleet.plans, folders, strict=True):
-        _, files = render_products(plan, dest.folder, with_map)
+    for plan, dest in zip(fleet.flying, folders, strict=True):
+        # A vehicle left idle gets an empty set: an earlier plan's mission there is removed.
+        files = {} if plan is None else render_products(plan, dest.folder, with_map)[1]
         writes.append((dest, files))
         listed += [str(dest.folder / name) for name in files]
-    own = {"plan.kml": fleet_kml(fleet.plans), "plan.geojson": fleet_geojson(fleet.plans)}
+    own = {"plan.kml": fleet_kml(fleet.flying), "plan.geojson": fleet_geojson(fleet.flying)}
     names = [*own, SUMMARY_FILE] + ([MAP_FILE] if with_map else [])
     rendered = [files for _dest, files in writes]
     data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed, rendered)
@@ -223,6 +264,6 @@ def write_fleet_products(
             f"separation: {f['separation']['mode']}, closest approach "
             f"{f['separation']['closest_approach_m']} m"
         )
-        top_files[MAP_FILE] = render_fleet_map(fleet.plans, title)
+        top_files[MAP_FILE] = render_fleet_map(fleet.flying, title)
     commit([*writes, (top, top_files)])
     return data

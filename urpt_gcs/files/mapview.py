@@ -382,23 +382,26 @@ def _scale_bar_and_north(ax: Any, lo: FloatArray, hi: FloatArray) -> None:
     )
 
 
-def render_fleet_map(plans: Sequence[Plan], title: str) -> bytes:
+def render_fleet_map(plans: Sequence[Plan | None], title: str) -> bytes:
     """A PNG of a fleet's plans: each vehicle's regions, targets, routes and home in its own
-    colour over the DSM of the widest window (the highest layer's)."""
+    colour over the DSM of the widest window (the highest layer's); None, a vehicle left
+    idle, is not drawn."""
     fig = fleet_figure(plans, title)
     out = io.BytesIO()
     fig.savefig(out, format="png")
     return out.getvalue()
 
 
-def fleet_figure(plans: Sequence[Plan], title: str) -> Figure:
+def fleet_figure(plans: Sequence[Plan | None], title: str) -> Figure:
     """The fleet map as a matplotlib figure; vehicle k's routes are the lines with gid
     ``vehicle k sortie N``."""
-    widest = max(plans, key=lambda p: p.terrain.elevation_m.size)
+    widest = max((p for p in plans if p is not None), key=lambda p: p.terrain.elevation_m.size)
     fig, ax, _ = _terrain_figure(widest.terrain)
     to_map = pyproj.Transformer.from_crs(WGS84, widest.crs, always_xy=True)
     drawn = []
     for number, plan in enumerate(plans, start=1):
+        if plan is None:
+            continue
         colour = sortie_colour(number)
         for region in plan.regions:
             if region.polygon.is_empty:

@@ -13,6 +13,11 @@ vehicles apart once at altitude; in time mode (``--separation time``) all fly on
 way the planned tracks are checked at every instant while both are in the air, and a vehicle
 whose track comes too close to an earlier one's starts later; the summary states each start
 delay and the planned closest approach.
+
+A vehicle whose every share would only land the fleet later (far slower than the others, or
+unable to reach any target within its endurance) is left idle: it has no plan, no mission and
+no start delay, and the summary says why. The fleet is refused only when some target is out
+of every vehicle's reach.
 """
 
 from __future__ import annotations
@@ -54,6 +59,8 @@ from urpt_gcs.solvers.fleet import (
     SINGLE_SHARE,
     FleetTours,
     Vehicle,
+    reachable,
+    refuse_unreachable,
     restrict,
     solve_fleet,
     with_home,
@@ -64,12 +71,39 @@ from urpt_gcs.visibility.regions import Region, visibility_regions
 
 
 @dataclass(frozen=True, slots=True)
+class IdleVehicle:
+    """A vehicle of the fleet given nothing to fly, and why.
+
+    Attributes
+    ----------
+    number
+        Its number in the fleet (1, 2, ...).
+    settings
+        Its own settings (home, speed, endurance).
+    altitude_m, altitude_rel_m
+        The layer it would have flown, and its height above its home.
+    home_lat_lon
+        Its home, WGS84 degrees.
+    reason
+        Why it flies nothing, for the operator.
+    """
+
+    number: int
+    settings: PlanSettings
+    altitude_m: float
+    altitude_rel_m: float
+    home_lat_lon: tuple[float, float]
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
 class FleetPlan:
-    """Every vehicle's plan and what the fleet as a whole achieved."""
+    """Every vehicle's plan (or, for a vehicle left idle, why it has none) and what the
+    fleet as a whole achieved."""
 
     settings: PlanSettings
     fleet: FleetSettings
-    plans: tuple[Plan, ...]
+    plans: tuple[Plan | IdleVehicle, ...]
     tours: FleetTours
     bound: MakespanBound
     separation: Separation
@@ -78,12 +112,20 @@ class FleetPlan:
     timings_s: dict[str, float]
 
     @property
+    def flying(self) -> tuple[Plan | None, ...]:
+        """Each vehicle's plan, None for a vehicle left idle."""
+        return tuple(p if isinstance(p, Plan) else None for p in self.plans)
+
+    @property
+    def idle(self) -> tuple[IdleVehicle, ...]:
+        """The vehicles left idle."""
+        return tuple(p for p in self.plans if isinstance(p, IdleVehicle))
+
+    @property
     def finish_s(self) -> tuple[float, ...]:
-        """When each vehicle has landed for the last time, from the first take-off."""
-        return tuple(
-            d + p.flight_time_s
-            for d, p in zip(self.separation.start_delays_s, self.plans, strict=True)
-        )
+        """When each vehicle has landed for the last time, from the first take-off (0 for a
+        vehicle left idle)."""
+        return _finish_s(self.plans, self.separation)
 
     @property
     def makespan_s(self) -> float:
@@ -239,8 +281,8 @@ def plan_fleet(
     Raises
     ------
     urpt_gcs.errors.SettingsError
-        A solver that places its own stops, a vehicle left nothing to photograph, or
-        vehicles that no start delay keeps apart.
+        A solver that places its own stops, a target no vehicle can reach within its
+        endurance, or vehicles that no start delay keeps apart.
     """
     if settings.agl_band_m is not None:
         raise SettingsError.about(
@@ -250,6 +292,7 @@ def plan_fleet(
         )
     stages = Stages(progress)
     problem = fleet_problem(dem_path, targets_path, settings, fleet, stages)
+    refuse_unreachable(problem.vehicles, problem.site.names)
     vehicles, reference = list(problem.vehicles), problem.reference
     solver = choose(reference, settings.solver)
     stages.say(f"preparing the {solver} solver (compiled on first use)")
@@ -281,11 +324,10 @@ def plan_fleet(
         try:
             again = _shared(problem, fleet, single.order, solvers, search, delays, stages)
         except SettingsError:
-            # Shared out again, a vehicle was left idle or no delays kept the vehicles apart:
-            # the first sharing stands.
+            # Shared out again, no delays kept the vehicles apart: the first sharing stands.
             again = None
-        if again is not None and _last_landing(again[1], again[2]) < _last_landing(
-            plans, separation
+        if again is not None and max(_finish_s(again[1], again[2])) < max(
+            _finish_s(plans, separation)
         ):
             tours, plans, separation = again
     bound = _makespan_bound(problem, single.length, settings, stages)
@@ -318,32 +360,72 @@ def _shared(
     search: SolveSettings,
     offsets_s: tuple[float, ...] | None,
     stages: Stages,
-) -> tuple[FleetTours, tuple[Plan, ...], Separation]:
+) -> tuple[FleetTours, tuple[Plan | IdleVehicle, ...], Separation]:
     """The targets shared out (each vehicle's start delay counted), every vehicle's plan
-    and the start delays that keep them apart. ``solvers``: the setting the search re-solves
-    with, and the solver the single tour came from."""
+    (or why it is left idle) and the start delays that keep them apart. ``solvers``: the
+    setting the search re-solves with, and the solver the single tour came from."""
     tours = solve_fleet(
         problem.vehicles, single_order, problem.reference, solvers[0], search, offsets_s
     )
     stages.lap("fleet")
-    idle = [k + 1 for k, share in enumerate(tours.targets) if not share]
-    if idle:
-        raise SettingsError.about(
-            "vehicle {number} has nothing left to photograph (the others' stops see all its "
-            "targets): use fewer vehicles ({vehicles} or {fleet_file})",
-            number=idle[0],
-        )
-    plans = tuple(
-        _vehicle_plan(k, layer, tours, solvers[1], stages) for k, layer in enumerate(problem.layers)
-    )
+    flown = [
+        _vehicle_plan(k, layer, tours, solvers[1], stages) if tours.targets[k] else None
+        for k, layer in enumerate(problem.layers)
+    ]
     stages.say("checking separation along the planned tracks")
-    separation = separate(plans, fleet, problem.site.crs, offsets_s)
+    separation = separate(flown, fleet, problem.site.crs, offsets_s)
     stages.lap("separation")
+    landing = max(
+        d + p.flight_time_s
+        for d, p in zip(separation.start_delays_s, flown, strict=True)
+        if p is not None
+    )
+    plans = tuple(p if p is not None else _idle(k, problem, landing) for k, p in enumerate(flown))
     return tours, plans, separation
 
 
-def _last_landing(plans: tuple[Plan, ...], separation: Separation) -> float:
-    return max(d + p.flight_time_s for d, p in zip(separation.start_delays_s, plans, strict=True))
+def _finish_s(plans: tuple[Plan | IdleVehicle, ...], separation: Separation) -> tuple[float, ...]:
+    return tuple(
+        d + p.flight_time_s if isinstance(p, Plan) else 0.0
+        for d, p in zip(separation.start_delays_s, plans, strict=True)
+    )
+
+
+def _idle(k: int, problem: FleetProblem, landing_s: float) -> IdleVehicle:
+    """Vehicle ``k`` left idle, and why: it reaches no target within its endurance, or its
+    quickest flight to any one target lands after the others have flown every target."""
+    layer, vehicle = problem.layers[k], problem.vehicles[k]
+    reach = reachable([vehicle])[0]
+    others = f"the others fly all {len(problem.site.names)} targets in {_minutes(landing_s)}"
+    if not reach.any():
+        endurance = layer.settings.endurance_min
+        reason = (
+            f"it cannot fly to any target and back within its {endurance:g} min endurance; "
+            + others
+        )
+    else:
+        quickest = float(vehicle.alone_s()[vehicle.flyable()].min())
+        speed = layer.settings.mission.cruise_speed_m_s
+        reason = (
+            f"at {speed:g} m/s its quickest flight to any one target takes "
+            f"{_minutes(quickest)}; {others}"
+            if quickest >= landing_s
+            else f"{others}; no share for it landed the fleet sooner"
+        )
+    home = layer.site.home_lat_lon
+    return IdleVehicle(
+        k + 1,
+        layer.settings,
+        layer.area.camera.altitude_m,
+        altitude_rel(layer.area),
+        (float(home[0]), float(home[1])),
+        reason,
+    )
+
+
+def _minutes(seconds: float) -> str:
+    m, s = divmod(round(seconds), 60)
+    return f"{m} min {s:02d} s"
 
 
 def _makespan_bound(
@@ -579,6 +661,7 @@ def _counted_once(tour: Tour, targets_xy: FloatArray) -> Tour:
 __all__ = [
     "FleetPlan",
     "FleetProblem",
+    "IdleVehicle",
     "VehicleLayer",
     "fleet_problem",
     "plan_fleet",

@@ -247,7 +247,7 @@ def pair_closest(tracks: Sequence[Track], i: int, j: int) -> Closest | None:
 
 
 def separate(
-    plans: Sequence[Plan],
+    plans: Sequence[Plan | None],
     fleet: FleetSettings,
     crs: pyproj.CRS,
     first: Sequence[float] | None = None,
@@ -264,7 +264,8 @@ def separate(
     Parameters
     ----------
     plans
-        Every vehicle's plan, in vehicle order.
+        Every vehicle's plan, in vehicle order; None for a vehicle left idle (it does not
+        take off: no start delay, never close to another).
     fleet
         The fleet's settings: separation mode, layer spacing and least distance.
     crs
@@ -282,6 +283,46 @@ def separate(
     urpt_gcs.errors.SettingsError
         No start delays up to the cap keep every pair apart.
     """
+    flying = [k for k, p in enumerate(plans) if p is not None]
+    if len(flying) < len(plans):
+        return _with_idle(plans, flying, fleet, crs, first)
+    flown = [p for p in plans if p is not None]
+    return _separate(flown, fleet, crs, first)
+
+
+def _with_idle(
+    plans: Sequence[Plan | None],
+    flying: list[int],
+    fleet: FleetSettings,
+    crs: pyproj.CRS,
+    first: Sequence[float] | None,
+) -> Separation:
+    """The flying vehicles kept apart, the vehicles named by their numbers in the fleet."""
+    flown = [p for p in plans if p is not None]
+    try:
+        apart = _separate(flown, fleet, crs, None if first is None else [first[k] for k in flying])
+    except SettingsError as exc:
+        # Its message numbers the flying vehicles only.
+        if exc.template is None or not {"a", "b"} <= exc.values.keys():
+            raise
+        a, b = (flying[exc.values[key] - 1] + 1 for key in ("a", "b"))
+        raise SettingsError.about(exc.template, **{**exc.values, "a": a, "b": b}) from None
+    delays = [0.0] * len(plans)
+    for k, d in zip(flying, apart.start_delays_s, strict=True):
+        delays[k] = d
+    closest = apart.closest
+    if closest is not None:
+        pair = (flying[closest.vehicles[0] - 1] + 1, flying[closest.vehicles[1] - 1] + 1)
+        closest = dataclasses.replace(closest, vehicles=pair)
+    return dataclasses.replace(apart, start_delays_s=tuple(delays), closest=closest)
+
+
+def _separate(
+    plans: Sequence[Plan],
+    fleet: FleetSettings,
+    crs: pyproj.CRS,
+    first: Sequence[float] | None,
+) -> Separation:
     base = [track(p) for p in plans]
     horizontal = fleet.separation == "time"
     need = fleet.min_m - (0.0 if horizontal else _WRITTEN_ROUNDING_M)

@@ -13,12 +13,14 @@ any two vehicles at equal times (:func:`closest_approach`). Equal times are the 
 station's clock: each position is timed by when it arrived, corrected for the delay of its
 delivery (the lower envelope of arrival minus the vehicle's own clock), so vehicles whose
 clocks started apart, or run at slightly different speeds, are compared at the same instant.
+A vehicle the plan leaves idle is not flown; the report names it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -113,6 +115,7 @@ class FleetReport:
     takeoff_wall_s: tuple[float, ...]
     wall_time_s: float
     problems: tuple[str, ...]
+    idle: tuple[FleetVehicle, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -414,26 +417,28 @@ def replay_fleet(
         If a vehicle's upload or flight fails.
     """
     settings = settings or ReplaySettings()
-    for vehicle in fleet.vehicles:
+    # A vehicle left idle has no mission: it stays on the ground.
+    flying = tuple(v for v in fleet.vehicles if not v.idle)
+    for vehicle in flying:
         if len(vehicle.missions) > 1:
             raise MissionFileError(
                 f"{vehicle.name} has {len(vehicle.missions)} sorties: a fleet replay flies one "
                 f"mission per vehicle; replay its sorties with --plan {vehicle.folder}"
             )
-    missions = [read_mission(v.missions[0]) for v in fleet.vehicles]
+    missions = [read_mission(v.missions[0]) for v in flying]
     open_dem(dem_path)
     read_targets(targets_path)
     expected = [
         expected_checks(v.missions[0], m, settings.fov_deg, settings.min_clearance_m)
-        for v, m in zip(fleet.vehicles, missions, strict=True)
+        for v, m in zip(flying, missions, strict=True)
     ]
     started = time.monotonic()
-    delays = [v.start_delay_s for v in fleet.vehicles]
+    delays = [v.start_delay_s for v in flying]
     flights = fly_fleet(missions, settings, progress, delays)
     wall_s = time.monotonic() - started
     reports: list[ReplayReport] = [
         judge(flight, mission, dem_path, targets_path, exp, f"{v.name} ({v.missions[0]})")
-        for flight, mission, exp, v in zip(flights, missions, expected, fleet.vehicles, strict=True)
+        for flight, mission, exp, v in zip(flights, missions, expected, flying, strict=True)
     ]
     together = judge_set(reports, dem_path, targets_path)
     approach, takeoff = closest_approach(
@@ -441,17 +446,22 @@ def replay_fleet(
         [m.home.amsl_m for m in missions],
         [(m.home.lat_deg, m.home.lon_deg) for m in missions],
     )
+    if approach is not None:
+        numbers = (flying[approach.pair[0] - 1].number, flying[approach.pair[1] - 1].number)
+        approach = dataclasses.replace(approach, pair=numbers)
     required = required_separation_m(fleet.separation)
     problems = []
     if approach is None:
-        problems.append("no two vehicles were in the air at once: the separation is unchecked")
+        # One vehicle flying alone has no one to keep apart from.
+        if len(flying) > 1:
+            problems.append("no two vehicles were in the air at once: the separation is unchecked")
     elif approach.distance_m < required:
         problems.append(
             f"vehicles {approach.pair[0]} and {approach.pair[1]} came within "
             f"{approach.distance_m:.1f} m of each other, under the required {required:g} m"
         )
     return FleetReport(
-        fleet.vehicles,
+        flying,
         together,
         fleet.separation,
         required,
@@ -459,6 +469,7 @@ def replay_fleet(
         takeoff,
         wall_s,
         tuple(problems),
+        tuple(v for v in fleet.vehicles if v.idle),
     )
 
 
@@ -472,6 +483,7 @@ def fleet_report_text(report: FleetReport) -> str:
         else f"by timing in one layer: required {report.required_m:g} m"
     )
     lines = [f"fleet: {len(report.vehicles)} vehicles flown at once, separation {rule}"]
+    lines += [f"  {v.name:<10} idle in the plan: not flown" for v in report.idle]
     for vehicle, flight_report, takeoff in zip(
         report.vehicles, report.together.reports, report.takeoff_wall_s, strict=True
     ):

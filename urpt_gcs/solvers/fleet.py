@@ -5,15 +5,21 @@ flight (the makespan) as short as it can be made (its lower bound is
 Each vehicle has its own instance (its layer's viewpoints and cover sets, its home as the
 depot) and its own flight model; a tour's time is the single-vehicle estimate, its stops cut
 into sorties within the vehicle's endurance where needed. The search starts from the naive
-split (the single-vehicle tour cut into K contiguous pieces of balanced time, each re-solved
-on its vehicle's layer) and then moves stops off the vehicle that lands last: a stop is taken
-out, the targets only it saw are put on another vehicle (the cheapest insertion of a viewpoint
-of that vehicle's layer seeing each), and the move is kept when both new flights are shorter
-than the old longest one. When no move helps, every vehicle's GTSP is re-solved on its targets
-(the ordinary solvers, a short budget each); if that shortens any flight, the moves go on.
-Every value compared is the time of a real tour over the vehicles' own candidates. A vehicle
-may be given a start delay (its offset): its flight then ends that much later, and the
-makespan the search shortens, like the naive split it starts from, counts it.
+split (:mod:`urpt_gcs.solvers.fleet_split`: the single-vehicle tour cut into K contiguous
+pieces of balanced time, each re-solved on its vehicle's layer) and then moves stops off the
+vehicle that lands last: a stop is taken out, the targets only it saw are put on another
+vehicle (the cheapest insertion of a viewpoint of that vehicle's layer seeing each), and the
+move is kept when both new flights are shorter than the old longest one. When no move helps,
+every vehicle's GTSP is re-solved on its targets (the ordinary solvers, a short budget each);
+if that shortens any flight, the moves go on. Every value compared is the time of a real
+tour over the vehicles' own candidates. A vehicle may be given a start delay (its offset):
+its flight then ends that much later, and the makespan the search shortens, like the naive
+split it starts from, counts it.
+
+A vehicle whose every share would only land the fleet later (far slower than the others, or
+too short an endurance to reach the targets) is left idle: the fleet never lands later than
+the one of its vehicles that flies the single tour alone the soonest. Only a target that no
+vehicle can reach within its endurance makes the fleet infeasible.
 
 Nothing here sees a raster: only instances, points, distances and the flight model.
 """
@@ -21,7 +27,6 @@ Nothing here sees a raster: only instances, points, distances and the flight mod
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,9 +36,16 @@ import numpy.typing as npt
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.errors import PlanError, SettingsError
-from urpt_gcs.problem.flight_time import FlightModel, split_sorties
 from urpt_gcs.problem.instance import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import SolveSettings
+from urpt_gcs.solvers.fleet_split import (
+    Vehicle,
+    naive_split,
+    reach_split,
+    reachable,
+    refuse_unreachable,
+    unreachable,
+)
 from urpt_gcs.solvers.registry import choose, prepare, solve
 
 __all__ = [
@@ -41,8 +53,11 @@ __all__ = [
     "FleetTours",
     "Vehicle",
     "naive_split",
+    "reachable",
+    "refuse_unreachable",
     "restrict",
     "solve_fleet",
+    "unreachable",
     "with_home",
 ]
 
@@ -62,59 +77,12 @@ _RESOLVE_S = 0.3
 
 
 @dataclass(frozen=True, slots=True)
-class Vehicle:
-    """One vehicle of the fleet as the solver sees it.
-
-    ``instance`` holds the viewpoints of the vehicle's layer over every target, with its home
-    as the depot; ``altitude_rel_m`` is the layer's height above that home.
-    """
-
-    instance: Instance
-    model: FlightModel
-    altitude_rel_m: float
-    endurance_s: float | None
-
-    def __post_init__(self) -> None:
-        if self.instance.depot_xy is None or self.instance.points_xy is None:
-            raise ValueError("a fleet vehicle's instance needs its home (depot) and points")
-
-    @property
-    def home_xy(self) -> tuple[float, float]:
-        assert self.instance.depot_xy is not None
-        return self.instance.depot_xy
-
-    def time_s(self, stops_xy: FloatArray) -> float:
-        """Flight time of the stops flown in this order, as sorties within the endurance
-        (infinite when one stop alone does not fit)."""
-        if len(stops_xy) == 0:
-            return 0.0
-        names = [f"stop {k}" for k in range(1, len(stops_xy) + 1)]
-        try:
-            sorties = split_sorties(
-                stops_xy, self.home_xy, self.altitude_rel_m, self.model, self.endurance_s, names
-            )
-        except PlanError:
-            return math.inf
-        return math.fsum(s.flight_time_s for s in sorties)
-
-    def out_and_back_s(self, distance_m: FloatArray) -> FloatArray:
-        """The least flight time of any sortie that reaches a point ``distance_m`` from home
-        and stops there: take-off, a way out and a way back each at least that long (at the
-        faster of the cruise and return speeds), one stop, the landing."""
-        m = self.model
-        d = np.asarray(distance_m, dtype=np.float64)
-        fastest = np.minimum(m.leg_s(d), m.return_s(d))
-        ends = m.takeoff_s(self.altitude_rel_m) + m.landing_s(self.altitude_rel_m)
-        out: FloatArray = ends + m.stop_s + 2.0 * fastest
-        return out
-
-
-@dataclass(frozen=True, slots=True)
 class FleetTours:
     """The fleet's tours: per vehicle, viewpoints of its own instance in flight order, the
-    targets it is counted for and its flight time. ``naive_times_s`` are the naive split's
-    pieces flown as cut (on the reference instance's viewpoints), ``start_times_s`` the same
-    pieces re-solved on each vehicle's own layer, where the search starts."""
+    targets it is counted for and its flight time (none and 0 for a vehicle left idle).
+    ``naive_times_s`` are the naive split's pieces flown as cut (on the reference instance's
+    viewpoints; where no cut fits, the start :func:`reach_split` gave), ``start_times_s``
+    the same pieces re-solved on each vehicle's own layer, where the search starts."""
 
     orders: tuple[tuple[int, ...], ...]
     targets: tuple[tuple[int, ...], ...]
@@ -125,6 +93,11 @@ class FleetTours:
     resolves: int
     search_s: float
     offsets_s: tuple[float, ...] = ()
+
+    @property
+    def idle(self) -> tuple[int, ...]:
+        """The vehicles (from 0) given nothing to fly."""
+        return tuple(k for k, order in enumerate(self.orders) if not order)
 
     @property
     def makespan_s(self) -> float:
@@ -139,9 +112,9 @@ class FleetTours:
 
 def _last_landing_s(offsets_s: Sequence[float] | None, times_s: Sequence[float]) -> float:
     """When the last of flights of these times lands, each started after its offset (none:
-    all at once)."""
+    all at once); a vehicle with no flight (time 0, idle) does not take off."""
     offsets = offsets_s if offsets_s is not None else [0.0] * len(times_s)
-    return max(o + t for o, t in zip(offsets, times_s, strict=True))
+    return max((o + t for o, t in zip(offsets, times_s, strict=True) if t > 0.0), default=0.0)
 
 
 def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntArray]:
@@ -226,8 +199,9 @@ class _Route:
 
     @property
     def finish_s(self) -> float:
-        """When it lands, from the first take-off: its start delay and its flight."""
-        return self.offset_s + self.time_s
+        """When it lands, from the first take-off: its start delay and its flight (0 for a
+        vehicle left idle)."""
+        return self.offset_s + self.time_s if self.order else 0.0
 
     def seen(self) -> npt.NDArray[np.bool_]:
         return self.vehicle.instance.covers.seen(self.order)
@@ -252,85 +226,6 @@ def _insert(route: _Route, order: list[int], candidates: IntArray) -> list[int]:
     added = ac + cb - ab[None, :]
     i, pos = np.unravel_index(int(np.argmin(added)), added.shape)
     return [*order[:pos], int(candidates[i]), *order[pos:]]
-
-
-def _naive_cut(
-    vehicles: Sequence[Vehicle], stops_xy: FloatArray, offsets_s: Sequence[float]
-) -> list[int]:
-    """Cut points ``0 = c_0 <= ... <= c_K = n`` of the stops into K contiguous pieces, piece
-    ``k`` flown by vehicle ``k`` in the given order from its home after its start delay
-    ``offsets_s[k]``, the last landing earliest.
-
-    A piece's time only grows as it takes in more stops at either end, so for a given longest
-    flight the greedy cut (each vehicle in turn takes all it can) decides whether one exists;
-    the least such longest flight is found by bisection between the pieces' times.
-    """
-    n, count = len(stops_xy), len(vehicles)
-    # Every vehicle gets a stop while there are enough to go round.
-    least = 1 if n >= count else 0
-
-    def greedy(limit_s: float) -> list[int] | None:
-        cuts = [0]
-        for k, vehicle in enumerate(vehicles):
-            first = cuts[-1]
-            lo, hi = first, n - least * (count - k - 1)
-            if hi < first + least:
-                return None
-            # The largest j whose piece first .. j - 1 fits; a piece only grows with j.
-            while lo < hi:
-                mid = (lo + hi + 1) // 2
-                if offsets_s[k] + vehicle.time_s(stops_xy[first:mid]) <= limit_s:
-                    lo = mid
-                else:
-                    hi = mid - 1
-            if lo < first + least:
-                return None
-            cuts.append(lo)
-        return cuts if cuts[-1] == n else None
-
-    # At the longest flight of the whole tour every piece fits, unless a vehicle cannot fly
-    # some stop within its endurance at all: then the cut must keep it off those stops.
-    whole = [t for t in (v.time_s(stops_xy) for v in vehicles) if math.isfinite(t)]
-    low, high = 0.0, max(whole, default=math.inf) + max(offsets_s)
-    found = greedy(high) if whole else None
-    if found is None:
-        raise SettingsError.about(
-            "no split of the targets among the vehicles fits every vehicle's endurance: "
-            "raise the endurance in {fleet_file} or {endurance_min}, or add vehicles"
-        )
-    while high - low > max(1e-3, 1e-6 * high):
-        mid = 0.5 * (low + high)
-        cuts = greedy(mid)
-        if cuts is None:
-            low = mid
-        else:
-            high, found = mid, cuts
-    return found
-
-
-def naive_split(
-    vehicles: Sequence[Vehicle],
-    single_order: Sequence[int],
-    reference: Instance,
-    offsets_s: Sequence[float] | None = None,
-) -> tuple[list[list[int]], list[float], list[list[int]]]:
-    """The single-vehicle tour (viewpoints of ``reference``) cut into K contiguous pieces of
-    earliest last landing (after the start delays ``offsets_s``, none by default), each
-    flown as cut from its vehicle's home: per vehicle the targets first seen in its piece,
-    the pieces' flight times and the pieces themselves."""
-    assert reference.points_xy is not None
-    stops = reference.points_xy[list(single_order)]
-    offsets = [0.0] * len(vehicles) if offsets_s is None else list(offsets_s)
-    cuts = _naive_cut(vehicles, stops, offsets)
-    covers = reference.covers.dense(list(single_order))
-    first_seen = np.argmax(covers, axis=0)
-    pieces, times, cut = [], [], []
-    for k, vehicle in enumerate(vehicles):
-        lo, hi = cuts[k], cuts[k + 1]
-        pieces.append([int(t) for t in np.flatnonzero((first_seen >= lo) & (first_seen < hi))])
-        times.append(vehicle.time_s(stops[lo:hi]))
-        cut.append([int(v) for v in single_order[lo:hi]])
-    return pieces, times, cut
 
 
 def solve_fleet(
@@ -368,24 +263,44 @@ def solve_fleet(
     def finish(times: Sequence[float]) -> float:
         return _last_landing_s(offsets, times)
 
-    pieces, naive_times, cut = naive_split(vehicles, single_order, reference, offsets)
+    refuse_unreachable(vehicles)
+    by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
     # The tour is a cycle: it is cut open at a few other stops too; the search descends from
-    # the best few cuts in turn and goes on from the best it reaches.
+    # the best few cuts in turn and goes on from the best it reaches. A start is, per
+    # vehicle, its targets and its stops on its own viewpoints.
     order = list(single_order)
-    cuts = [(finish(naive_times), pieces, cut)]
-    for r in _ROTATIONS if len(vehicles) > 1 else ():
-        if time.perf_counter() - started > _ROTATION_SHARE * settings.time_limit_s:
+    starts: list[tuple[float, list[list[int]], list[list[int]]]] = []
+    naive_times: list[float] | None = None
+    for r in (0.0, *_ROTATIONS) if len(vehicles) > 1 else (0.0,):
+        if r and time.perf_counter() - started > _ROTATION_SHARE * settings.time_limit_s:
             break
         shift = int(r * len(order))
-        if shift == 0:
+        if r and shift == 0:
             continue
         try:
-            tried = naive_split(vehicles, order[shift:] + order[:shift], reference, offsets)
+            pieces, times, cut = naive_split(
+                vehicles, order[shift:] + order[:shift], reference, offsets
+            )
         except SettingsError:
             continue  # no cut from there fits every endurance
-        cuts.append((finish(tried[1]), tried[0], tried[2]))
-    cuts.sort(key=lambda c: c[0])
-    by_target = [_viewpoints_by_target(v.instance) for v in vehicles]
+        naive_times = times if naive_times is None else naive_times
+        own = [
+            _carried(v, c, reference, by_target[k])
+            for k, (v, c) in enumerate(zip(vehicles, cut, strict=True))
+        ]
+        starts.append((finish(times), pieces, own))
+    if not starts:
+        # No cut of the tour fits, yet the vehicles between them reach every target.
+        own = reach_split(vehicles, _first_seen(reference, order), offsets)
+        reached = [
+            _Route(v, o, offsets[k]) for k, (v, o) in enumerate(zip(vehicles, own, strict=True))
+        ]
+        owners = _owners(reached)
+        pieces = [[int(t) for t in np.flatnonzero(owners == k)] for k in range(len(reached))]
+        naive_times = [r.time_s for r in reached]
+        starts.append((finish(naive_times), pieces, own))
+    assert naive_times is not None
+    starts.sort(key=lambda c: c[0])
     resolves = 0
 
     def resolve(k: int, targets: list[int], budget_s: float) -> list[int]:
@@ -405,16 +320,14 @@ def solve_fleet(
 
     budget = max(0.05, min(_RESOLVE_S, settings.time_limit_s / (4 * len(vehicles))))
 
-    def begin(pieces: list[list[int]], cut: list[list[int]]) -> list[_Route]:
+    def begin(pieces: list[list[int]], own: list[list[int]]) -> list[_Route]:
         routes = []
         for k, vehicle in enumerate(vehicles):
             route = _Route(vehicle, resolve(k, pieces[k], budget) if pieces[k] else [], offsets[k])
             # The piece as cut, on the vehicle's own viewpoints, if that is quicker: the
             # solvers shorten the length, not the time with its stops, and have little time.
-            if cut[k]:
-                as_cut = _Route(
-                    vehicle, _carried(vehicle, cut[k], reference, by_target[k]), offsets[k]
-                )
+            if own[k]:
+                as_cut = _Route(vehicle, own[k], offsets[k])
                 if as_cut.time_s < route.time_s:
                     route = as_cut
             routes.append(route)
@@ -447,16 +360,16 @@ def solve_fleet(
                 break
         return moves, improved_any
 
-    starts = cuts[:_STARTS]
+    starts = starts[:_STARTS]
     short_until = started + _STARTS_SHARE * settings.time_limit_s
     routes: list[_Route] = []
     start_times: tuple[float, ...] = ()
     moves = 0
-    for n, (_, pieces_n, cut_n) in enumerate(starts):
+    for n, (_, pieces_n, own_n) in enumerate(starts):
         now = time.perf_counter()
         if n > 0 and now >= short_until:
             break
-        trial = begin(pieces_n, cut_n)
+        trial = begin(pieces_n, own_n)
         if n == 0:
             start_times = tuple(r.time_s for r in trial)
         until = now + max(short_until - now, 0.0) / (len(starts) - n)
@@ -471,6 +384,7 @@ def solve_fleet(
             break
         moved, _ = descend(routes, deadline, long_round=False)
         moves += moved
+    routes = _no_later_than_alone(routes, order, reference, by_target)
     owners = _owners(routes)
     return FleetTours(
         orders=tuple(tuple(r.order) for r in routes),
@@ -485,6 +399,27 @@ def solve_fleet(
         search_s=time.perf_counter() - started,
         offsets_s=tuple(offsets),
     )
+
+
+def _no_later_than_alone(
+    routes: list[_Route], single: list[int], reference: Instance, near: list[list[IntArray]]
+) -> list[_Route]:
+    """``routes``, or the single tour flown by the one vehicle that lands it earliest (the
+    others idle) if that lands sooner than the last of ``routes``."""
+    alone = [
+        _Route(r.vehicle, _carried(r.vehicle, single, reference, near[k]), r.offset_s)
+        for k, r in enumerate(routes)
+    ]
+    k = min(range(len(alone)), key=lambda k: alone[k].finish_s)
+    if alone[k].finish_s >= max(r.finish_s for r in routes) - _EPS_S:
+        return routes
+    return [alone[k] if j == k else _Route(r.vehicle, [], r.offset_s) for j, r in enumerate(routes)]
+
+
+def _first_seen(reference: Instance, order: list[int]) -> list[int]:
+    """The targets in the order the tour first sees them."""
+    first = np.argmax(reference.covers.dense(order), axis=0)
+    return [int(t) for t in np.argsort(first, kind="stable")]
 
 
 def _carried(
@@ -567,7 +502,7 @@ def _seen_except(routes: list[_Route], skip: set[int]) -> npt.NDArray[np.bool_]:
 def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline: float) -> int:
     """Move a stop off the vehicle that lands last, or swap one of its stops with a nearby
     stop of another vehicle, while that shortens it without making the other's flight as
-    long; the number of moves made. A vehicle keeps at least one stop."""
+    long; the number of moves made. A vehicle whose last stop moves is left idle."""
     moves = 0
     while time.perf_counter() < deadline:
         c = int(np.argmax([r.finish_s for r in routes]))
@@ -578,7 +513,7 @@ def _move_stops(routes: list[_Route], by_target: list[list[IntArray]], deadline:
             rest_s = (
                 critical.offset_s + critical.vehicle.time_s(critical.points[rest]) if rest else 0.0
             )
-            if not rest or rest_s >= worst - _EPS_S:
+            if rest_s >= worst - _EPS_S:
                 continue
             lost = _lost(critical, stop, rest, _seen_except(routes, {c}))
             for j, other in enumerate(routes):

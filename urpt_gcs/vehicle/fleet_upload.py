@@ -150,7 +150,8 @@ def upload_fleet(
     progress
         Called with a short message, prefixed with the vehicle, as each upload goes on.
     sortie
-        Which sortie to upload to a vehicle that has several; a vehicle with fewer is skipped.
+        Which sortie to upload to a vehicle that has several; a vehicle with fewer is skipped,
+        and so is a vehicle the plan leaves idle (it is not connected to).
 
     Returns
     -------
@@ -247,9 +248,11 @@ async def _by_sysid(
         _entry(v, f"{url} (system {sysid})", sortie, load is not None)
         for v, sysid, load in zip(fleet.vehicles, system_ids, loaded, strict=True)
     ]
-    say(f"waiting for systems {', '.join(map(str, system_ids))} on {url}")
+    # A vehicle left idle need not be on the link.
+    wanted = [i for v, i in zip(fleet.vehicles, system_ids, strict=True) if not v.idle]
+    say(f"waiting for systems {', '.join(map(str, wanted))} on {url}")
     try:
-        async with connect_systems(url, system_ids, settings.timeout_s) as links:
+        async with connect_systems(url, wanted, settings.timeout_s) as links:
             results = []
             # One at a time: the links share one MAVSDK instance and its transfer timeout.
             for entry, sysid, load in zip(entries, system_ids, loaded, strict=True):
@@ -281,6 +284,12 @@ def report_lines(report: FleetUploadReport, folder: Path) -> list[str]:
     lines = []
     for entry in report.vehicles:
         head = f"{entry.vehicle.name} on {entry.connection}"
+        if entry.vehicle.idle:
+            lines.append(
+                f"{head}: idle in this plan, nothing sent (not connected); it may still hold "
+                "an earlier mission: keep it on the ground"
+            )
+            continue
         if entry.mission_file is None:
             lines.append(
                 f"{head}: skipped, it has {entry.sorties} sortie"

@@ -254,11 +254,14 @@ def plan_kml(plan: Plan) -> str:
     return _kml(_features(plan), len(plan.sorties), "Sortie")
 
 
-def _fleet_features(plans: Sequence[Plan]) -> list[_Feature]:
+def _fleet_features(plans: Sequence[Plan | None]) -> list[_Feature]:
     """Every vehicle's features, its routes and stops in the vehicle's colour (``sortie`` is
-    the vehicle's number here) and every feature's properties naming its vehicle."""
+    the vehicle's number here) and every feature's properties naming its vehicle; a vehicle
+    left idle (None) has none."""
     out = []
     for number, plan in enumerate(plans, start=1):
+        if plan is None:
+            continue
         for f in _features(plan):
             grouped = f.sortie is not None
             properties = {**f.properties, "vehicle": number}
@@ -276,12 +279,13 @@ def _fleet_features(plans: Sequence[Plan]) -> list[_Feature]:
     return out
 
 
-def fleet_kml(plans: Sequence[Plan]) -> str:
-    """A fleet's plans as one KML document: a folder and a colour per vehicle."""
+def fleet_kml(plans: Sequence[Plan | None]) -> str:
+    """A fleet's plans as one KML document: a folder and a colour per vehicle (None: a
+    vehicle left idle, drawn nowhere)."""
     return _kml(_fleet_features(plans), len(plans), "Vehicle")
 
 
-def fleet_geojson(plans: Sequence[Plan]) -> str:
+def fleet_geojson(plans: Sequence[Plan | None]) -> str:
     """A fleet's plans as one GeoJSON FeatureCollection; every feature has a ``vehicle``."""
     return _geojson(_fleet_features(plans))
 
