@@ -343,3 +343,12 @@ def _one_line_after_report(result: Any) -> str:
     lines = result.stderr.splitlines()
     assert len(lines) == 1, result.stderr
     return lines[0]
+
+
+def test_a_sortie_number_without_a_fleet_is_refused_before_connecting() -> None:
+    # It was ignored: the file given went up, whatever --sortie said.
+    args = ["upload", str(DEMO_OUT / "mission.plan"), "--sortie", "2"]
+    result = CliRunner().invoke(main, [*args, "--connect", "udpin://127.0.0.1:1", "--timeout", "1"])
+    assert result.exit_code == 1
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("urpt-gcs: error: --sortie 2 picks a sortie of a --fleet upload")

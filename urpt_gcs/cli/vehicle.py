@@ -47,9 +47,8 @@ __all__ = ["sitl_group", "sitl_replay_command", "upload_command"]
 @click.option(
     "--sortie",
     type=int,
-    default=1,
-    show_default=True,
-    help="With --fleet: the sortie to upload to a vehicle that has several.",
+    default=None,
+    help="With --fleet: the sortie to upload to a vehicle that has several [default: 1].",
 )
 @click.option(
     "--retries",
@@ -70,7 +69,7 @@ def upload_command(
     connects: tuple[str, ...],
     fleet_dir: Path | None,
     sysid: str | None,
-    sortie: int,
+    sortie: int | None,
     retries: int,
     timeout: float,
 ) -> None:
@@ -85,12 +84,17 @@ def upload_command(
     if fleet_dir is not None:
         if mission_file is not None:
             raise SettingsError("give PLAN or --fleet OUT, not both")
-        _upload_fleet(fleet_dir, connects, sysid, sortie, retries, timeout)
+        _upload_fleet(fleet_dir, connects, sysid, 1 if sortie is None else sortie, retries, timeout)
         return
     if mission_file is None:
         raise SettingsError("no mission given: urpt-gcs upload PLAN, or --fleet OUT")
     if sysid is not None:
         raise SettingsError("--sysid names the vehicles of a --fleet upload: add --fleet OUT")
+    if sortie is not None:
+        raise SettingsError(
+            f"--sortie {sortie} picks a sortie of a --fleet upload: upload that sortie's own "
+            "file (mission_N.plan), or add --fleet OUT"
+        )
     if len(connects) > 1:
         raise SettingsError("several --connect are for --fleet: give one for a single mission")
     mission = read_mission(mission_file, flag="urpt-gcs upload")
