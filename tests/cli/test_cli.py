@@ -400,7 +400,7 @@ def test_without_a_terminal_each_stage_prints_one_line_with_its_time(
     ]
     assert stages[4].startswith("preparing the ") and stages[5].startswith("solving (")
     assert stages[6:] == [
-        "stops seeing from anywhere within 1.5 m",
+        "stops keeping their targets in the picture within 1.5 m",
         "moving the stops within what they see",
         "ordering the stops for sorties (up to 0.1 s)",
         "checking the missions",

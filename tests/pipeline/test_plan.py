@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from support.independent import (
 from support.targets import REAL_CASES, kml_targets, valid_targets
 
 from urpt_gcs.files.products import write_products
+from urpt_gcs.pipeline import planner
 from urpt_gcs.pipeline.planner import plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.solvers import SolveSettings
@@ -110,6 +112,50 @@ def test_every_stop_sees_its_targets_from_around_its_waypoint(
                 if not ok:
                     missed.append((stop["order"], name, azimuth, why))
     assert missed == []
+
+
+@pytest.mark.parametrize("tolerance_m", [1.5, 5.0])
+def test_every_stop_keeps_its_targets_in_the_cone_from_its_whole_tolerance_disc(
+    tmp_path: Path, tolerance_m: float
+) -> None:
+    """The disc of --position-tolerance around each written waypoint, not only points of its
+    rim, lies inside the cone's circle at every target the stop is counted for: R - d >= r,
+    measured independently in the DEM's CRS, the cone's radius from the height as written
+    over the DEM's bilinear ground at the target (1 mm for arithmetic)."""
+    settings = PlanSettings(solve=FAST, position_tolerance_m=tolerance_m)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    write_products(result, tmp_path, with_map=False)
+    raster = load_raster(DEMO / "site.tif")
+    flown = read_waypoints_file(tmp_path / "mission.waypoints")
+    targets = {name: (lat, lon) for name, lat, lon in kml_targets(DEMO / "targets.kml")}
+    stops = json.loads((tmp_path / "summary.json").read_text())["stops"]
+    assert len(stops) == len(flown.waypoints)
+    tan = math.tan(math.radians(30.0))
+    margins = []
+    for stop, (lat, lon, amsl) in zip(stops, flown.waypoints, strict=True):
+        ex, ey = raster.to_src.transform(lon, lat)
+        for name in stop["sees"]:
+            t_lat, t_lon = targets[name]
+            tx, ty = raster.to_src.transform(t_lon, t_lat)
+            ground = float(raster.height(np.array([t_lon]), np.array([t_lat]))[0])
+            margin = (amsl - ground) * tan - math.hypot(tx - ex, ty - ey) - tolerance_m
+            margins.append((margin, stop["order"], name))
+    assert len(margins) >= 16
+    assert min(margins)[0] >= -1e-3, sorted(margins)[:3]
+
+
+def test_the_missions_as_written_are_measured_for_the_disc_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Without the margin stage (and refinement) the solver's stops sit on the edge of what
+    they see: the check of the missions as written names each one whose disc leaves the
+    picture, in a warning."""
+    monkeypatch.setattr(planner, "robust_tour", lambda site, tour, home, names: (tour, []))
+    settings = PlanSettings(solve=FAST, position_tolerance_m=5.0, refine=False)
+    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
+    short = [w for w in result.warnings if "in the picture only within" in w]
+    assert short, result.warnings
+    assert all(w.endswith("not 5 m: a vehicle that stops farther off may miss it") for w in short)
 
 
 @needs_shared(REAL_DEMS)

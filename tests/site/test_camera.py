@@ -95,6 +95,42 @@ def test_gsd_caps_the_distance_to_the_target() -> None:
     assert ok.tolist() == [True, False]
 
 
+@pytest.mark.parametrize("framed", [False, True])
+def test_the_whole_disc_around_the_eye_is_held_not_samples_of_it(framed: bool) -> None:
+    """``in_view(..., within_m=r)`` says whether the target is in the picture from every point
+    within r of the eye: against 3600 points of the disc's rim (the footprint is convex, so
+    the rim decides) for random eyes, targets and headings, with a GSD cap on the frame."""
+    frame = Frame(13.2, 8.8, 8.8, 5472, 3648)
+    camera = Camera.framed(30.0, frame, gsd_cm=1.0) if framed else Camera(30.0, 30.0)
+    rng = np.random.default_rng(11)
+    n, r = 400, 1.5
+    eye = rng.uniform(-25.0, 25.0, (n, 2))
+    target = rng.uniform(-25.0, 25.0, (n, 2))
+    ground = rng.uniform(0.0, 5.0, n)
+    heading = rng.uniform(0.0, 360.0, n)
+    held = camera.in_view(eye, target, ground, heading, within_m=r)
+    a = np.linspace(0.0, 2.0 * math.pi, 3600, endpoint=False)
+    rim = r * np.column_stack([np.cos(a), np.sin(a)])
+    every = np.array(
+        [
+            camera.in_view(
+                eye[k] + rim,
+                np.tile(target[k], (len(a), 1)),
+                ground[[k] * len(a)],
+                np.full(len(a), heading[k]),
+            ).all()
+            for k in range(n)
+        ]
+    )
+    margin = camera.view_margin_m(eye, target, ground, heading)
+    # Held: every rim point sees. Seen from every sample of the rim: held, or short of it by
+    # no more than the samples' spacing leaves unseen, (1 - cos(0.05 deg)) r.
+    assert not np.any(held & ~every)
+    assert np.all(margin[every & ~held] >= r - 1e-6)
+    assert np.array_equal(held, margin >= r)
+    assert 0 < int(held.sum()) < n
+
+
 @pytest.mark.parametrize(
     ("flags", "needle"),
     [

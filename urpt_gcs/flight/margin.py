@@ -3,9 +3,15 @@
 A copter does not photograph exactly at the waypoint: PX4 brakes past it and holds there (its
 photos land 0.2-1.2 m beyond the stop), ArduCopter within about 0.2 m. The solver's stops
 sit on the edge of what they see (region boundaries pulled in by one cell), so a photo a
-metre off can miss a target the plan counts as seen. Each stop is therefore checked from
-every point of a ring of the tolerance's radius around it, and one that fails is moved
-towards the targets it must see until the whole ring sees them.
+metre off can miss a target the plan counts as seen. Each stop is therefore checked against
+the disc of the tolerance's radius around it on the flight plane (:func:`sees_around`): every
+target it must see stays in the picture from the whole disc, held exactly (the disc lies
+inside the cone's circle, or the frame's rectangle, iff the stop lies inside it shrunk by the
+radius), and in sight over the terrain from the stop, from the disc's point farthest from
+the target and from ``RING_POINTS`` points of its rim (a line of sight cannot be checked
+from every point of a disc: these are samples). The picture is held, and the line of sight
+checked from the position itself, as the mission writes the stop too: its position, heading
+and height. A stop that fails is moved towards the targets it must see until it passes.
 """
 
 from __future__ import annotations
@@ -13,19 +19,20 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from urpt_gcs.arrays import FloatArray
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.solvers import Tour
-from urpt_gcs.visibility.cover import cover_sets
 from urpt_gcs.visibility.regions import Camera, line_of_sight
 
-__all__ = ["RING_POINTS", "robust_tour"]
+__all__ = ["RING_POINTS", "Site", "robust_tour", "sees_around"]
 
-# Points on the ring around each stop, besides the stop itself.
+# Points on the rim of the disc around each stop that lines of sight are checked from,
+# besides the stop itself (what is in the picture is held over the whole disc).
 RING_POINTS = 8
 # How far a failing stop moves towards its targets on each try, as a share of the way.
 _STEPS = np.linspace(0.1, 1.0, 10)
@@ -33,41 +40,96 @@ _STEPS = np.linspace(0.1, 1.0, 10)
 _SEARCH_RADII = np.array([0.5, 1.0, 2.0, 3.0, 4.0])
 _SEARCH_ANGLES = 16
 
-
-def _ring(point: FloatArray, radius_m: float) -> FloatArray:
-    angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
-    ring = point + radius_m * np.column_stack([np.cos(angles), np.sin(angles)])
-    return np.vstack([point[None, :], ring])
+Written = Callable[[FloatArray], FloatArray]
+WrittenHeading = Callable[[FloatArray, FloatArray], FloatArray]
+Fill = Callable[[FloatArray, FloatArray], object]
 
 
-def _holding(
-    terrain: Terrain,
-    targets_xy: FloatArray,
-    ground_m: FloatArray,
-    camera: Camera,
-    points_xy: FloatArray,
-    sees: npt.NDArray[np.bool_],
-    tolerance_m: float,
-    headings_deg: FloatArray | None = None,
-) -> npt.NDArray[np.bool_]:
-    """Which stops see every target they are counted for from all of their ring, tested
-    in one call: the cone (or the frame at the stop's heading) from every ring point, then
-    every line of sight."""
+@dataclass(frozen=True, slots=True)
+class Site:
+    """What a stop is checked against: the terrain, the targets and the camera, the position
+    tolerance, and how the mission writes a stop."""
+
+    terrain: Terrain
+    targets_xy: FloatArray
+    ground_m: FloatArray
+    camera: Camera
+    tolerance_m: float = 0.0
+    min_clearance_m: float = 0.0
+    # The position the mission writes for a point (the 1e-7 degree grid); None: as is.
+    written: Written | None = None
+    # Reads the terrain along legs where a sparse mosaic holds none yet.
+    fill: Fill | None = None
+    workers: int | None = 1
+    # The plane's height as the mission writes it (None: the camera's), and the heading it
+    # writes for a stop at a point and grid heading (None: as is).
+    written_eye_m: float | None = None
+    written_heading: WrittenHeading | None = None
+
+
+def sees_around(
+    site: Site,
+    cand: FloatArray,
+    sees: BoolArray,
+    heading: FloatArray | None,
+    also: Callable[[IntArray], BoolArray] | None = None,
+) -> BoolArray:
+    """Whether each candidate stop sees every target of its row of ``sees`` from anywhere
+    within ``site.tolerance_m`` of it, and from its position as written.
+
+    Each target must be in the picture (the cone, or the frame at the stop's heading) from
+    every point of the disc of ``site.tolerance_m`` around the stop, and of the same disc
+    around its position as written, from the height and at the heading as written (both
+    exact: :meth:`~urpt_gcs.visibility.regions.Camera.view_margin_m`); and in sight over the
+    terrain from the stop, from its position as written, from the disc's point farthest from
+    the target and from ``RING_POINTS`` points of the disc's rim. With ``also``, the stop
+    must pass that check too (given the indices of the stops still standing once the
+    targets are in the picture, before any line of sight is walked: lines of sight cost the
+    most).
+    """
+    cam = site.camera
+    radius = max(site.tolerance_m, 0.0)
     stop, target = np.nonzero(sees)
-    angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
-    offsets = np.vstack(
-        [[0.0, 0.0], tolerance_m * np.column_stack([np.cos(angles), np.sin(angles)])]
-    )
-    eye_xy = (points_xy[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
-    pair_stop = np.repeat(stop, len(offsets))
-    pair_target = np.repeat(target, len(offsets))
-    heading = None if headings_deg is None else np.repeat(headings_deg[stop], len(offsets))
-    ok = camera.in_view(eye_xy, targets_xy[pair_target], ground_m[pair_target], heading)
-    eye = np.column_stack([eye_xy[ok], np.full(int(ok.sum()), camera.altitude_m)])
-    tgt = np.column_stack([targets_xy[pair_target[ok]], ground_m[pair_target[ok]]])
-    ok[ok] = line_of_sight(terrain, eye, tgt)
-    failed = np.zeros(len(points_xy), dtype=bool)
-    failed[pair_stop[~ok]] = True
+    tx, tg = site.targets_xy[target], site.ground_m[target]
+    at = None if heading is None else heading[stop]
+    failed = np.zeros(len(cand), dtype=bool)
+    failed[stop[~cam.in_view(cand[stop], tx, tg, at, radius)]] = True
+    # Lines of sight from the stop and as written first, from the disc's rim after.
+    eyes = [np.column_stack([cand[stop], np.full(len(stop), cam.altitude_m)])]
+    pairs = [np.arange(len(stop))]
+    if site.written is not None:
+        xy = site.written(cand[stop])
+        eye_m = cam.altitude_m if site.written_eye_m is None else site.written_eye_m
+        as_written = dataclasses.replace(cam, altitude_m=eye_m)
+        if at is not None and site.written_heading is not None:
+            at = site.written_heading(cand[stop], at)
+        failed[stop[~as_written.in_view(xy, tx, tg, at, radius)]] = True
+        eyes[0] = np.vstack([eyes[0], np.column_stack([xy, np.full(len(stop), eye_m)])])
+        pairs[0] = np.concatenate([pairs[0], pairs[0]])
+    if also is not None and not failed.all():
+        standing = np.flatnonzero(~failed)
+        failed[standing] = ~also(standing)
+    if radius > 0.0:
+        # The disc's point farthest from the target (straight away from it: the certified
+        # bound's stars, shrunk by the tolerance, count on that point seeing), then the rim's.
+        away = cand[stop] - tx
+        length = np.hypot(away[:, 0], away[:, 1])
+        unit = np.tile([1.0, 0.0], (len(stop), 1))  # over the target: any way
+        some = length > 0.0
+        unit[some] = away[some] / length[some, None]
+        far = np.column_stack([cand[stop] + radius * unit, np.full(len(stop), cam.altitude_m)])
+        eyes.append(far)
+        pairs.append(np.arange(len(stop)))
+        angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
+        rim = radius * np.column_stack([np.cos(angles), np.sin(angles), np.zeros(RING_POINTS)])
+        eyes.append((eyes[0][: len(stop), None, :] + rim[None, :, :]).reshape(-1, 3))
+        pairs.append(np.repeat(np.arange(len(stop)), RING_POINTS))
+    t3 = np.column_stack([tx, tg])
+    for eye, pair in zip(eyes, pairs, strict=True):
+        walk = ~failed[stop[pair]]
+        if walk.any():
+            clear = line_of_sight(site.terrain, eye[walk], t3[pair[walk]], site.workers)
+            failed[stop[pair[walk]][~clear]] = True
     return ~failed
 
 
@@ -96,31 +158,27 @@ def _tries(
 
 
 def robust_tour(
-    terrain: Terrain,
-    targets_xy: FloatArray,
-    ground_m: FloatArray,
-    camera: Camera,
+    site: Site,
     tour: Tour,
     depot_xy: tuple[float, float] | None,
-    tolerance_m: float,
     names: list[str],
 ) -> tuple[Tour, list[str]]:
-    """The tour with every stop seeing its targets from anywhere within ``tolerance_m``.
+    """The tour with every stop seeing its targets from anywhere within the tolerance.
 
-    A stop that does not is moved: towards its targets, else to the nearest point around it
-    that holds the margin; a stop counted for several targets that no single point near it
-    sees with the margin is split into one stop per target, in place.
+    A stop that does not (:func:`sees_around`) is moved: towards its targets, else to the
+    nearest point around it that holds the margin; a stop counted for several targets that no
+    single point near it sees with the margin is split into one stop per target, in place.
 
     Parameters
     ----------
-    terrain, targets_xy, ground_m, camera
-        The terrain, the targets and their ground heights, and the camera on the plane.
+    site
+        The terrain, the targets and their ground heights, the camera on the plane, the
+        tolerance (how far from its waypoint the vehicle may take the photo; 0 keeps the
+        tour) and how the mission writes a stop.
     tour
         The solver's tour; ``tour.sees`` says which targets each stop is counted for.
     depot_xy
         Home, where the tour starts and ends (None: a closed cycle).
-    tolerance_m
-        How far from its waypoint the vehicle may take the photo; 0 keeps the tour.
     names
         The targets' names, for the warnings.
 
@@ -130,6 +188,7 @@ def robust_tour(
         The tour (stops moved or split where needed, its length measured again) and a warning
         for every target that no stop could be made to see with the margin.
     """
+    tolerance_m, targets_xy = site.tolerance_m, site.targets_xy
     if tolerance_m <= 0.0 or tour.points_xy is None or len(tour.points_xy) == 0:
         return tour, []
     points: list[FloatArray] = []
@@ -143,11 +202,15 @@ def robust_tour(
     )
     framed = tour.headings_deg is not None
 
+    def holding(
+        points_xy: FloatArray, rows: npt.NDArray[np.bool_], at: FloatArray
+    ) -> npt.NDArray[np.bool_]:
+        return sees_around(site, points_xy, rows, at if framed else None)
+
     def holds(point: FloatArray, must: npt.NDArray[np.intp], heading: float) -> bool:
-        ring = _ring(point, tolerance_m)
-        at = np.full(len(ring), heading) if framed else None
-        seen = cover_sets(terrain, ring, targets_xy[must], ground_m[must], camera, 1, at)
-        return bool(seen.all())
+        row = np.zeros((1, len(targets_xy)), dtype=bool)
+        row[0, must] = True
+        return bool(holding(point[None, :], row, np.array([heading]))[0])
 
     def place(point: FloatArray, must: npt.NDArray[np.intp], heading: float) -> FloatArray | None:
         aim = targets_xy[must].mean(axis=0)
@@ -163,21 +226,6 @@ def robust_tour(
         return None
 
     stops_xy = np.asarray(tour.points_xy, dtype=np.float64)
-
-    def holding(
-        points_xy: FloatArray, rows: npt.NDArray[np.bool_], at: FloatArray
-    ) -> npt.NDArray[np.bool_]:
-        return _holding(
-            terrain,
-            targets_xy,
-            ground_m,
-            camera,
-            points_xy,
-            rows,
-            tolerance_m,
-            at if framed else None,
-        )
-
     settled = holding(stops_xy, tour.sees, stop_headings)
     # Stops that fail are searched for all at once, try by try in the order `place` takes.
     spots = stops_xy.copy()

@@ -3,12 +3,13 @@
 The solver's stops are candidate viewpoints: boundary samples of the visibility regions. The
 shortest flight enters the regions anywhere, so each stop is moved, in turn, within the
 region of everything it must see (the intersection of those targets' true regions), to
-shorten its two legs. A move is kept only when it shortens the tour and, checked exactly on
-the DEM's bilinear surface, the stop still sees every target it is counted for from all of
-the ring of ``tolerance_m`` around it (the camera cone, or the frame at the stop's heading),
-its position as the mission writes it still sees them, and both new legs (and, with a
-depot, the leg straight home, which a flight cut into sorties may fly) clear the terrain by
-``min_clearance_m`` over known ground. The result is never longer than the tour given.
+shorten its two legs. A move is kept only when it shortens the tour, the stop still sees
+every target it is counted for from anywhere within ``tolerance_m`` of it and as the mission
+writes it (:func:`~urpt_gcs.flight.margin.sees_around`: in the picture from the whole disc,
+exactly, and in sight on the DEM's bilinear surface from the stop and points of the disc's
+rim), and both new legs (and, with a depot, the leg straight home, which a flight cut into
+sorties may fly) clear the terrain by ``min_clearance_m`` over known ground. The result is
+never longer than the tour given.
 
 First, a target counted at several stops is kept at the first of them only, and a stop left
 with nothing to see is dropped where the leg that skips it clears: fewer targets per stop
@@ -33,11 +34,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
-from urpt_gcs.flight.margin import RING_POINTS
-from urpt_gcs.site.terrain import Terrain
+from urpt_gcs.flight.margin import Site, Written, sees_around
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.outer import points_along
-from urpt_gcs.visibility.regions import Camera, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
 
 # Fractions of the way to the line between the neighbours, tried each sweep.
@@ -58,9 +57,6 @@ _ROUNDS = 4
 # keep the sweeps going.
 _MIN_GAIN_M = 0.01
 
-Written = Callable[[FloatArray], FloatArray]
-Fill = Callable[[FloatArray, FloatArray], object]
-
 
 @dataclass(frozen=True, slots=True)
 class Refinement:
@@ -77,23 +73,6 @@ class Refinement:
         if self.before_m <= 0.0:
             return 0.0
         return 100.0 * (self.before_m - self.after_m) / self.before_m
-
-
-@dataclass(frozen=True, slots=True)
-class Site:
-    """What a move is checked against: the terrain, the targets and the camera."""
-
-    terrain: Terrain
-    targets_xy: FloatArray
-    ground_m: FloatArray
-    camera: Camera
-    tolerance_m: float = 0.0
-    min_clearance_m: float = 0.0
-    # The position the mission writes for a point (the 1e-7 degree grid); None: as is.
-    written: Written | None = None
-    # Reads the terrain along legs where a sparse mosaic holds none yet.
-    fill: Fill | None = None
-    workers: int | None = 1
 
 
 def _closed_length(points: FloatArray, depot: FloatArray | None) -> float:
@@ -139,13 +118,13 @@ def _feasible(
     is checked too: a flight cut into sorties may fly it."""
 
     # The cheap checks first and the costly ones only for the stops still standing: which
-    # targets are in the camera's view (arithmetic), then the short legs to the neighbours,
-    # then the lines of sight (the stop's own first, its ring after), and the long leg home
-    # last. The checks are the same; most candidates fail the first ones.
+    # targets are in the camera's view from the whole disc (arithmetic), then the short legs
+    # to the neighbours, then the lines of sight (the stop's own first, its rim after), and
+    # the long leg home last. The checks are the same; most candidates fail the first ones.
     def legs(idx: IntArray) -> BoolArray:
         return _legs_clear(site, [a[idx], cand[idx]], [cand[idx], b[idx]])
 
-    ok = _sees_all(site, cand, sees, heading, legs)
+    ok = sees_around(site, cand, sees, heading, legs)
     if depot is not None and ok.any():
         ok[ok] = _legs_clear(site, [cand[ok]], [np.tile(depot, (int(ok.sum()), 1))])
     return ok
@@ -153,9 +132,9 @@ def _feasible(
 
 def flies_from(site: Site, cand: FloatArray, sees: BoolArray, depot: FloatArray) -> BoolArray:
     """Whether a stop could be flown from each candidate (a cone camera): it sees every
-    target of its row of ``sees`` from all of the tolerance ring, from itself and as written,
+    target of its row of ``sees`` from anywhere within the tolerance and as written,
     and its leg straight home clears the terrain (a sortie may end there)."""
-    ok = _sees_all(site, cand, sees, None)
+    ok = sees_around(site, cand, sees, None)
     if ok.any():
         ok[ok] = _legs_clear(site, [cand[ok]], [np.tile(depot, (int(ok.sum()), 1))])
     return ok
@@ -174,55 +153,6 @@ def _legs_clear(site: Site, starts: list[FloatArray], ends: list[FloatArray]) ->
     legs_ok = (prof.unknown_fraction == 0.0) & (prof.excess_m <= -site.min_clearance_m)
     out: BoolArray = legs_ok.reshape(len(starts), n).all(axis=0)
     return out
-
-
-def _sees_all(
-    site: Site,
-    cand: FloatArray,
-    sees: BoolArray,
-    heading: FloatArray | None,
-    also: Callable[[IntArray], BoolArray] | None = None,
-) -> BoolArray:
-    """Whether each candidate stop sees every target of its row of ``sees`` from all of the
-    ring of ``site.tolerance_m`` around it, from itself, and from its position as written;
-    with ``also``, and passes that check too (given the indices of the stops still standing
-    once the targets are in view, before any line of sight is walked)."""
-    cam = site.camera
-    # Every target from the ring around the candidate (and from the candidate itself).
-    angles = np.arange(RING_POINTS) * (2.0 * math.pi / RING_POINTS)
-    offsets = np.vstack(
-        [[0.0, 0.0], site.tolerance_m * np.column_stack([np.cos(angles), np.sin(angles)])]
-    )
-    if site.tolerance_m <= 0.0:
-        offsets = offsets[:1]
-    stop, target = np.nonzero(sees)
-    eye = (cand[stop][:, None, :] + offsets[None, :, :]).reshape(-1, 2)
-    pair_stop = np.repeat(stop, len(offsets))
-    pair_target = np.repeat(target, len(offsets))
-    on_ring = np.tile(np.arange(len(offsets)) > 0, len(stop))
-    at = None if heading is None else np.repeat(heading[stop], len(offsets))
-    if site.written is not None:
-        # The position as written, seen from exactly there.
-        eye = np.vstack([eye, site.written(cand[stop])])
-        pair_stop = np.concatenate([pair_stop, stop])
-        pair_target = np.concatenate([pair_target, target])
-        on_ring = np.concatenate([on_ring, np.zeros(len(stop), dtype=bool)])
-        at = None if at is None or heading is None else np.concatenate([at, heading[stop]])
-    tx, tg = site.targets_xy[pair_target], site.ground_m[pair_target]
-    failed = np.zeros(len(cand), dtype=bool)
-    seen = cam.in_view(eye, tx, tg, at)
-    failed[pair_stop[~seen]] = True
-    if also is not None and not failed.all():
-        standing = np.flatnonzero(~failed)
-        failed[standing] = ~also(standing)
-    for ring in (False, True):
-        walk = seen & (on_ring == ring) & ~failed[pair_stop]
-        if walk.any():
-            e3 = np.column_stack([eye[walk], np.full(int(walk.sum()), cam.altitude_m)])
-            t3 = np.column_stack([tx[walk], tg[walk]])
-            clear = line_of_sight(site.terrain, e3, t3, site.workers)
-            failed[pair_stop[walk][~clear]] = True
-    return ~failed
 
 
 def refine_tour(
@@ -338,7 +268,7 @@ def tour_along(
         near = nearest[t, : max(int(np.searchsorted(dist[t], cone[t])), 1)]
         row = np.zeros((len(near), m), dtype=bool)
         row[:, t] = True
-        seen = np.flatnonzero(_sees_all(site, samples[near], row, None))
+        seen = np.flatnonzero(sees_around(site, samples[near], row, None))
         if seen.size:
             k = int(near[seen[0]])
             stops[t] = samples[k]
@@ -387,8 +317,10 @@ _ALONG_SHARE = 0.002
 # Samples along the polyline at most, and per target the nearest of them tried at most.
 _ALONG_MOST = 50_000
 _NEAREST = 1024
-# Halvings towards the nadir for a stop read off a polyline that does not see its target.
+# Halvings towards the nadir for a stop read off a polyline that does not see its target: at
+# most this many, each start's until what it brackets is this short (metres).
 _TOWARDS_STEPS = 40
+_TOWARDS_TO_M = 1e-3
 
 
 def _towards_seen(site: Site, start: FloatArray, target: int) -> FloatArray:
@@ -397,13 +329,17 @@ def _towards_seen(site: Site, start: FloatArray, target: int) -> FloatArray:
     c = site.targets_xy[target]
     row = np.zeros((len(start), len(site.targets_xy)), dtype=bool)
     row[:, target] = True
+    way = np.hypot(*(c - start).T)
     lo = np.zeros(len(start))  # share of the way travelled that fails
     hi = np.ones(len(start))  # share that sees (the nadir is taken to)
     for _ in range(_TOWARDS_STEPS):
-        mid = 0.5 * (lo + hi)
-        ok = _sees_all(site, start + mid[:, None] * (c - start), row, None)
-        hi = np.where(ok, mid, hi)
-        lo = np.where(ok, lo, mid)
+        todo = np.flatnonzero((hi - lo) * way > _TOWARDS_TO_M)
+        if todo.size == 0:
+            break
+        mid = 0.5 * (lo[todo] + hi[todo])
+        ok = sees_around(site, start[todo] + mid[:, None] * (c - start[todo]), row[todo], None)
+        hi[todo] = np.where(ok, mid, hi[todo])
+        lo[todo] = np.where(ok, lo[todo], mid)
     out: FloatArray = start + hi[:, None] * (c - start)
     return out
 

@@ -1,8 +1,10 @@
 """The tour flown: cut into sorties, written as missions, and checked as written.
 
 The checks run on the missions as the vehicle will store them (positions on the 1e-7 degree
-grid, altitude in whole centimetres): every stop still sees its targets, every leg keeps its
-clearance over the terrain, and the height above ground stays within ``--max-agl``.
+grid, altitude in whole centimetres): every stop still sees its targets (and, short of a
+warning, keeps them in the picture from the whole disc of ``--position-tolerance`` around
+it), every leg keeps its clearance over the terrain, and the height above ground stays within
+``--max-agl``.
 """
 
 from __future__ import annotations
@@ -150,8 +152,9 @@ def sorties_and_missions(
 
 
 def check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site:
-    """What a stop is checked against: the position margin, the written grid and the legs'
-    clearance, on the terrain read so far (filled along new legs)."""
+    """What a stop is checked against: the position margin, the position, heading and height
+    the mission writes, and the legs' clearance, on the terrain read so far (filled along new
+    legs)."""
     to_geo = pyproj.Transformer.from_crs(site.crs, WGS84, always_xy=True)
     to_grid = pyproj.Transformer.from_crs(WGS84, site.crs, always_xy=True)
 
@@ -166,6 +169,13 @@ def check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site
     def fill(a: FloatArray, b: FloatArray) -> None:
         fill_along(site.dem, area.terrain, a, b)
 
+    def heading(xy: FloatArray, grid_deg: FloatArray) -> FloatArray:
+        # As _headings writes it: the true bearing to a hundredth of a degree.
+        true = true_bearing_deg(site.crs, xy, grid_deg)
+        step = _HEADING_STEP_DEG
+        out: FloatArray = grid_deg + (np.round(true / step) * step - true)
+        return out
+
     return Site(
         terrain=area.terrain,
         targets_xy=site.targets_xy,
@@ -176,7 +186,15 @@ def check_site(site: SiteInputs, area: PlanArea, settings: PlanSettings) -> Site
         written=written_grid(to_latlon, to_xy),
         fill=fill,
         workers=settings.workers,
+        written_eye_m=_home_amsl_m(area) + altitude_rel(area),
+        written_heading=heading,
     )
+
+
+def _home_amsl_m(area: PlanArea) -> float:
+    """Home's height as the mission writes it: whole centimetres, rounded down, so that every
+    check of the mission as written measures from a height the vehicle is at or above."""
+    return math.floor(area.home_ground_m * 100.0) / 100.0
 
 
 def _alternatives(
@@ -184,7 +202,7 @@ def _alternatives(
 ) -> tuple[FloatArray, IntArray] | None:
     """Other positions each stop may be flown from in the sortie search: its nearest
     candidate viewpoints that see every target it is counted for, checked as refinement checks
-    a stop (from all of the tolerance ring and as written, and the leg straight home). None
+    a stop (from anywhere within the tolerance and as written, and the leg straight home). None
     for a frame camera (its stops carry headings) or a tour not over the plane's points."""
     if tour.headings_deg is not None or tour.points_xy is None or instance.points_xy is None:
         return None
@@ -193,7 +211,7 @@ def _alternatives(
         return None
     check = check_site(site, area, settings)
     home = np.asarray(site.home_xy, dtype=np.float64)
-    # Candidates lie on the edge of what they see, where the tolerance ring leaves it: each
+    # Candidates lie on the edge of what they see, where the tolerance disc leaves it: each
     # is drawn towards its stop (which passes) by halving, and the passing point nearest it
     # kept.
     stop_xy = tour.points_xy[own]
@@ -230,9 +248,7 @@ def _write_missions(
     sorties = split_sorties(
         tour.points_xy, site.home_xy, rel_m, flight_model(settings), endurance, stop_names
     )
-    # Home written a little low (whole centimetres, down): every check of the mission as
-    # written then measures from a height the vehicle is at or above.
-    home = GeoPoint(*site.home_lat_lon, math.floor(area.home_ground_m * 100.0) / 100.0)
+    home = GeoPoint(*site.home_lat_lon, _home_amsl_m(area))
     stops_latlon = xy_to_latlon(site.crs, tour.points_xy)
     true_headings, written_grid = _headings(site.crs, tour, sorties)
     missions = tuple(
@@ -245,10 +261,10 @@ def _write_missions(
         )
         for s in sorties
     )
-    legs = _check_as_written(
-        site, area, missions, sorties, tour.sees, stop_names, settings.workers, written_grid
+    legs, warnings = _check_as_written(
+        site, area, missions, sorties, tour.sees, stop_names, settings, written_grid
     )
-    warnings = check_legs(legs, settings.min_clearance_m)
+    warnings += check_legs(legs, settings.min_clearance_m)
     stop_ground = area.terrain.sample(tour.points_xy[:, 0], tour.points_xy[:, 1])
     warnings += check_height_above_ground(
         area.camera.altitude_m,
@@ -306,15 +322,20 @@ def _check_as_written(
     sorties: tuple[Sortie, ...],
     sees: BoolArray,
     stop_names: list[str],
-    workers: int | None,
+    settings: PlanSettings,
     headings_deg: FloatArray | None = None,
-) -> tuple[Leg, ...]:
-    """Check the missions as the vehicle will store them, and return their legs.
+) -> tuple[tuple[Leg, ...], list[str]]:
+    """Check the missions as the vehicle will store them; return their legs and a warning
+    for every target that leaves the picture from part of the tolerance disc of its stop.
 
-    Positions are the written ones (on the 1e-7 degree grid) and the altitude the written one
-    (whole centimetres above home): every stop must still see every target the plan says it
-    sees, and the legs' clearance is measured between those positions.
+    Positions are the written ones (on the 1e-7 degree grid), the altitude the written one
+    (whole centimetres above home) and headings the written ones: every stop must still see
+    every target the plan says it sees, and the legs' clearance is measured between those
+    positions. The margin stage and refinement keep each target in the picture from the
+    whole disc of ``--position-tolerance`` around its stop as written, short of a stop the
+    margin stage could not place (it warned then); measured here again, exactly.
     """
+    workers = settings.workers
     eye_m = missions[0].home.amsl_m + missions[0].altitude_rel_m
     written_camera = dataclasses.replace(area.camera, altitude_m=eye_m)
     legs: tuple[Leg, ...] = ()
@@ -341,7 +362,22 @@ def _check_as_written(
             "written to the mission's 1e-7 degree grid: it sits on the edge of what the camera "
             "sees; widen --fov, raise --samples or change --altitude"
         )
-    return legs
+    stop, target = np.nonzero(sees)
+    margin = written_camera.view_margin_m(
+        written[stop],
+        site.targets_xy[target],
+        area.ground_m[target],
+        None if headings_deg is None else headings_deg[stop],
+    )
+    tolerance = settings.position_tolerance_m
+    warnings = [
+        f"{stop_names[k]} keeps target '{site.names[t]}' in the picture only within "
+        f"{max(m, 0.0):.2f} m of its waypoint, not {tolerance:g} m: a vehicle that stops "
+        "farther off may miss it"
+        for k, t, m in zip(stop.tolist(), target.tolist(), margin.tolist(), strict=True)
+        if m < tolerance
+    ]
+    return legs, warnings
 
 
 def flight_model(settings: PlanSettings) -> FlightModel:

@@ -209,8 +209,9 @@ PLAN_OPTIONS: tuple[Option, ...] = (
         "position_tolerance_m",
         "number",
         1.5,
-        "How far from a waypoint the vehicle may take its photo, metres: every stop must see "
-        "its targets from anywhere that close (0: from the waypoint only).",
+        "How far from a waypoint the vehicle may take its photo, metres: every stop keeps "
+        "its targets in the picture from anywhere that close on the flight plane, and in sight "
+        "from the waypoint and 9 points that far from it (0: from the waypoint only).",
         unit="m",
     ),
     Option(

@@ -30,7 +30,7 @@ from urpt_gcs.pipeline.area import (
 )
 from urpt_gcs.pipeline.band import plan_in_band
 from urpt_gcs.pipeline.improve import bounds_tour, certify_flight, prepare_bound, refine_stops
-from urpt_gcs.pipeline.missions import flight_model, sorties_and_missions
+from urpt_gcs.pipeline.missions import check_site, flight_model, sorties_and_missions
 from urpt_gcs.pipeline.result import Plan
 from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages, solve_stage
@@ -119,16 +119,11 @@ def finish_plan(
         The checked tour, its missions and everything computed on the way.
     """
     over_candidates = tour.proven_optimal
-    stages.say(f"stops seeing from anywhere within {settings.position_tolerance_m:g} m")
+    stages.say(
+        f"stops keeping their targets in the picture within {settings.position_tolerance_m:g} m"
+    )
     tour, margin_warnings = robust_tour(
-        area.terrain,
-        site.targets_xy,
-        area.ground_m,
-        area.camera,
-        tour,
-        site.home_xy,
-        settings.position_tolerance_m,
-        site.names,
+        check_site(site, area, settings), tour, site.home_xy, site.names
     )
     stages.lap("margin")
     refinement = None

@@ -140,24 +140,52 @@ class Camera:
         target_xy: FloatArray,
         ground_m: FloatArray,
         heading_deg: FloatArray | None = None,
+        within_m: float = 0.0,
     ) -> BoolArray:
-        """Whether each target lies in the picture taken from ``eye_xy[k]`` (terrain aside).
+        """Whether each target lies in the picture taken from ``eye_xy[k]`` (terrain aside);
+        with ``within_m``, in the picture taken from every point of the plane within
+        ``within_m`` of it.
 
         The cone and the GSD distance; for a frame camera, inside the frame turned by
-        ``heading_deg[k]`` (needed then).
+        ``heading_deg[k]`` (needed then). The disc is held exactly, not sampled: see
+        :meth:`view_margin_m`.
+        """
+        ok: BoolArray = self.view_margin_m(eye_xy, target_xy, ground_m, heading_deg) >= within_m
+        return ok
+
+    def view_margin_m(
+        self,
+        eye_xy: FloatArray,
+        target_xy: FloatArray,
+        ground_m: FloatArray,
+        heading_deg: FloatArray | None = None,
+    ) -> FloatArray:
+        """How far each eye may move on the plane, in any direction, with its target still
+        in the picture (terrain aside); negative: the target is out of it by that much.
+
+        What a photo from the eye holds at the target's height is the circle of
+        :meth:`cone_radius_m` about the eye, and for a frame camera the rectangle of half-sides
+        ``h tan`` across and along ``heading_deg[k]``: both symmetric about the eye, so the
+        disc of radius ``r`` around the eye sees the target iff the disc of radius ``r``
+        around the target lies inside the footprint, iff the target is ``r`` inside the
+        circle (``R - d >= r``) and ``r`` inside each pair of the rectangle's sides.
         """
         eye = np.asarray(eye_xy, dtype=np.float64).reshape(-1, 2)
         tgt = np.asarray(target_xy, dtype=np.float64).reshape(-1, 2)
         ground = np.asarray(ground_m, dtype=np.float64).reshape(-1)
         dx, dy = tgt[:, 0] - eye[:, 0], tgt[:, 1] - eye[:, 1]
-        ok: BoolArray = np.hypot(dx, dy) <= self.cone_radius_m(ground)
+        margin: FloatArray = self.cone_radius_m(ground) - np.hypot(dx, dy)
         if self.frame is None:
-            return ok
+            return margin
         if heading_deg is None:
             raise ValueError("a frame camera needs the heading of every photo")
         h = np.maximum(self.altitude_m - ground, 0.0)
-        ok &= in_frame(self.frame, dx, dy, h, heading_deg)
-        return ok
+        psi = np.radians(np.asarray(heading_deg, dtype=np.float64))
+        along = dx * np.sin(psi) + dy * np.cos(psi)
+        across = dx * np.cos(psi) - dy * np.sin(psi)
+        margin = np.minimum(margin, h * self.frame.half_tan_across - np.abs(across))
+        out: FloatArray = np.minimum(margin, h * self.frame.half_tan_along - np.abs(along))
+        return out
 
     def least_half_width_m(self, ground_m: npt.ArrayLike) -> FloatArray:
         """The narrowest half-extent of what one photo sees around its centre, per target:
