@@ -353,7 +353,7 @@ def _renamed(code: str, name: str) -> pyproj.CRS:
 @pytest.mark.parametrize(
     ("crs", "label"),
     [
-        ("EPSG:32632", "EPSG:32632"),
+        ("EPSG:32632", "WGS 84 / UTM zone 32N"),
         (
             "+proj=tmerc +lat_0=47 +lon_0=9.4 +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m",
             "a custom Transverse Mercator CRS",
@@ -366,6 +366,8 @@ def test_a_crs_is_named_in_one_short_line_never_as_its_wkt(
     crs: str | pyproj.CRS, label: str
 ) -> None:
     assert crs_label(pyproj.CRS(crs)) == label
+    code_first = crs_label(pyproj.CRS(crs), code_first=True)
+    assert code_first == (crs if crs == "EPSG:32632" else label)
 
 
 def test_state_plane_feet_dem_is_georeferenced_in_utm(write_dem: WriteDem) -> None:

@@ -191,7 +191,7 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
             "cell_m": round(plan.terrain.cell_m, 4),
             "read_window_px": list(plan.terrain.read_window_px),
             "source_shape_px": list(plan.terrain.source_shape_px),
-            "crs_name": crs_label(plan.crs),
+            "crs_name": crs_label(plan.crs, code_first=True),
             "source_crs": crs_label(plan.dem.crs),
             "band": plan.dem.band,
             "vertical_unit": plan.dem.vertical_unit.name,

@@ -347,16 +347,21 @@ def planning_crs(info: DemInfo, lon_lat_bounds: tuple[float, float, float, float
     return pyproj.CRS.from_authority(zones[0].auth_name, zones[0].code)
 
 
-def crs_label(crs: pyproj.CRS) -> str:
-    """A CRS as a person names it, in one short line: its authority code (``EPSG:32632``) when
-    it has one, else its name, else what kind of CRS it is (``a custom Transverse Mercator
-    CRS``); never its WKT."""
-    code = crs.to_authority(min_confidence=90)
-    if code is not None:
-        return f"{code[0]}:{code[1]}"
+def crs_label(crs: pyproj.CRS, code_first: bool = False) -> str:
+    """A CRS as a person names it, in one short line, never its WKT: its name (``WGS 84 /
+    Pseudo-Mercator``) or, with ``code_first`` or without a name, its authority code
+    (``EPSG:32632``); failing both, what kind of CRS it is (``a custom Transverse Mercator
+    CRS``)."""
+    found = crs.to_authority(min_confidence=90)
+    code = None if found is None else f"{found[0]}:{found[1]}"
     name = " ".join((crs.name or "").split())
-    if name and name.lower() not in ("unknown", "unnamed", "undefined"):
-        return name if len(name) <= 80 else name[:77] + "..."
+    if name.lower() in ("", "unknown", "unnamed", "undefined"):
+        name = ""
+    elif len(name) > 80:
+        name = name[:77] + "..."
+    for label in (code, name) if code_first else (name, code):
+        if label:
+            return label
     operation = crs.coordinate_operation
     if crs.is_projected and operation is not None and operation.method_name:
         return f"a custom {operation.method_name} CRS"
