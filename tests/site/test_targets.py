@@ -367,6 +367,9 @@ UNFIT_NAMES = [
     ),
     ("nonchar.geojson", _GEOJSON_NAME.format("\\ufdd0"), "feature 1", "U+FDD0"),
     ("plane_16.geojson", _GEOJSON_NAME.format("\U0010ffff"), "feature 1", "U+10FFFF"),
+    # Shown as "Mast gnirw" read right to left: another name than the file's.
+    ("rlo.kml", _KML_NAME.format("Mast\u202ewring"), "placemark 2", "text-direction mark U+202E"),
+    ("isolate.csv", "name,lat,lon\nRoof\u2067,47.379,8.542\n", "row 2", "U+2067"),
 ]
 
 
@@ -380,6 +383,28 @@ def test_a_name_no_output_can_hold_is_refused_in_every_format(
 
     assert what in message
     assert message.endswith(": remove it from the name")
+
+
+def test_a_kml_placemark_without_geometry_is_refused_and_a_line_ignored(tmp_path: Path) -> None:
+    # It was skipped without a word: a target the file forgot to locate.
+    kml = (
+        '<kml xmlns="http://www.opengis.net/kml/2.2"><Document>'
+        "<Placemark><name>Roof</name><Point><coordinates>8.542,47.379</coordinates></Point>"
+        "</Placemark><Placemark><name>Fence</name><LineString><coordinates>8.542,47.379 "
+        "8.543,47.379</coordinates></LineString></Placemark>"
+        "<Placemark><name>Mast</name><description>north corner</description></Placemark>"
+        "</Document></kml>"
+    )
+    path = tmp_path / "targets.kml"
+    path.write_text(kml)
+    message = _assert_error(path, "has placemark 3 'Mast' with no geometry")
+    assert message.endswith(": give it a Point or remove the placemark")
+    path.write_text(
+        kml.replace(
+            "<Placemark><name>Mast</name><description>north corner</description></Placemark>", ""
+        )
+    )
+    assert [t.name for t in read_targets(path).targets] == ["Roof"]
 
 
 def test_a_kmz_name_is_checked_as_its_kml(tmp_path: Path) -> None:

@@ -110,10 +110,12 @@ def _points(name: str | None, where: str, lon_lats: list[tuple[float, float]]) -
 
 
 # What no output can hold: control characters (C0 but the tab, DEL, C1; XML 1.0 forbids most
-# and the rest are invisible), surrogates (a lone one cannot even be written as UTF-8) and
-# noncharacters (U+FDD0..U+FDEF and the last two code points of every plane).
+# and the rest are invisible), surrogates (a lone one cannot even be written as UTF-8),
+# noncharacters (U+FDD0..U+FDEF and the last two code points of every plane), and the
+# invisible marks that turn the text's direction (U+202A..U+202E, U+2066..U+2069): a name
+# holding one shows in a map or a list as another name.
 _UNFIT = re.compile(
-    "[\x00-\x1f\x7f-\x9f\ud800-\udfff\ufdd0-\ufdef"
+    "[\x00-\x1f\x7f-\x9f\ud800-\udfff\ufdd0-\ufdef\u202a-\u202e\u2066-\u2069"
     + "".join(chr(plane << 16 | 0xFFFE) + chr(plane << 16 | 0xFFFF) for plane in range(17))
     + "]"
 )
@@ -130,6 +132,8 @@ def _name_problem(name: str) -> str | None:
         return f"the control character {code}"
     if unicodedata.category(char) == "Cs":
         return f"a lone surrogate {code} (half of a UTF-16 pair)"
+    if unicodedata.category(char) == "Cf":
+        return f"the invisible text-direction mark {code}"
     return f"the noncharacter {code}"
 
 
@@ -143,6 +147,21 @@ def _decode(source: str, data: bytes, fix: str) -> str:
 def _local(tag: object) -> str:
     """An element's tag without its namespace, so every KML version reads alike."""
     return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
+
+
+# KML's geometry elements (gx:Track and gx:MultiTrack of Google's extension included).
+_KML_GEOMETRIES = frozenset(
+    (
+        "Point",
+        "LineString",
+        "LinearRing",
+        "Polygon",
+        "MultiGeometry",
+        "Model",
+        "Track",
+        "MultiTrack",
+    )
+)
 
 
 def _kml_points(source: str, data: bytes) -> list[_Point]:
@@ -171,6 +190,12 @@ def _kml_points(source: str, data: bytes) -> list[_Point]:
         lon_lats = [_kml_lon_lat(source, where, name, e) for e in placemark.iterfind(".//{*}Point")]
         if lon_lats:
             points.extend(_points(name, where, lon_lats))
+        elif not any(_local(e.tag) in _KML_GEOMETRIES for e in placemark.iter()):
+            # A line or a polygon is not a target; a placemark with no place at all is a
+            # target the file forgot to locate.
+            shown = where if name is None else f"{where} {_q(name)}"
+            problem = f"has {shown} with no geometry"
+            raise _error(source, problem, "give it a Point or remove the placemark")
     if not points:
         problem = "contains no Point placemarks (lines and polygons are ignored)"
         raise _error(source, problem, "add a Placemark with a Point for each target")
@@ -581,8 +606,9 @@ def read_targets(path: Path) -> TargetSet:
         If the file is missing, not a regular file, over 64 MiB, unreadable, empty, of an
         unknown kind, malformed or declares XML entities; if it has no targets, a point off
         the globe, two homes or two targets within 1e-7 degrees of each other; if two
-        targets have one name, or a name holds a control character, a noncharacter or a
-        lone surrogate; if a GeoJSON feature has no geometry; if a KMZ holds several
+        targets have one name, or a name holds a control character, a noncharacter, a lone
+        surrogate or an invisible text-direction mark; if a GeoJSON feature or a KML
+        placemark has no geometry (a line or a polygon is ignored); if a KMZ holds several
         ``.kml`` files and no ``doc.kml`` to say which to read.
     """
     source = str(path)
