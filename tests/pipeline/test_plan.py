@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyproj
@@ -12,6 +13,8 @@ import pytest
 from conftest import DEMO, REAL_DEMS, needs_shared
 from pymavlink import mavutil
 from support.independent import (
+    FlownMission,
+    Raster,
     check_mission,
     leg_clearances,
     load_raster,
@@ -87,6 +90,20 @@ def test_300_targets_on_the_demo_plan_and_check(tmp_path: Path) -> None:
     assert check_mission(DEMO / "site.tif", files, points, fov_deg=30.0, min_clearance_m=10.0) == []
 
 
+def _demo_as_written(
+    out: Path, tolerance_m: float
+) -> tuple[Raster, FlownMission, dict[str, tuple[float, float]], list[dict[str, Any]]]:
+    """The demo planned at ``tolerance_m`` and written to ``out``, read back independently:
+    the raster, the written waypoints, the targets by name, the summary's stops."""
+    settings = PlanSettings(solve=FAST, position_tolerance_m=tolerance_m)
+    write_products(plan(DEMO / "site.tif", DEMO / "targets.kml", settings), out, with_map=False)
+    flown = read_waypoints_file(out / "mission.waypoints")
+    targets = {name: (lat, lon) for name, lat, lon in kml_targets(DEMO / "targets.kml")}
+    stops = json.loads((out / "summary.json").read_text())["stops"]
+    assert len(stops) == len(flown.waypoints)
+    return load_raster(DEMO / "site.tif"), flown, targets, stops
+
+
 @pytest.mark.parametrize("tolerance_m", [1.5, 3.0])
 def test_every_stop_sees_its_targets_from_around_its_waypoint(
     tmp_path: Path, tolerance_m: float
@@ -94,14 +111,7 @@ def test_every_stop_sees_its_targets_from_around_its_waypoint(
     """A vehicle that photographs up to --position-tolerance off its waypoint (PX4 brakes
     past it) still sees every target its stop is counted for: checked independently from
     eight points around each written waypoint, just inside the tolerance."""
-    settings = PlanSettings(solve=FAST, position_tolerance_m=tolerance_m)
-    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
-    write_products(result, tmp_path, with_map=False)
-    raster = load_raster(DEMO / "site.tif")
-    flown = read_waypoints_file(tmp_path / "mission.waypoints")
-    targets = {name: (lat, lon) for name, lat, lon in kml_targets(DEMO / "targets.kml")}
-    stops = json.loads((tmp_path / "summary.json").read_text())["stops"]
-    assert len(stops) == len(flown.waypoints)
+    raster, flown, targets, stops = _demo_as_written(tmp_path, tolerance_m)
     geod = pyproj.Geod(ellps="WGS84")
     missed = []
     for stop, (lat, lon, amsl) in zip(stops, flown.waypoints, strict=True):
@@ -122,14 +132,7 @@ def test_every_stop_keeps_its_targets_in_the_cone_from_its_whole_tolerance_disc(
     rim, lies inside the cone's circle at every target the stop is counted for: R - d >= r,
     measured independently in the DEM's CRS, the cone's radius from the height as written
     over the DEM's bilinear ground at the target (1 mm for arithmetic)."""
-    settings = PlanSettings(solve=FAST, position_tolerance_m=tolerance_m)
-    result = plan(DEMO / "site.tif", DEMO / "targets.kml", settings)
-    write_products(result, tmp_path, with_map=False)
-    raster = load_raster(DEMO / "site.tif")
-    flown = read_waypoints_file(tmp_path / "mission.waypoints")
-    targets = {name: (lat, lon) for name, lat, lon in kml_targets(DEMO / "targets.kml")}
-    stops = json.loads((tmp_path / "summary.json").read_text())["stops"]
-    assert len(stops) == len(flown.waypoints)
+    raster, flown, targets, stops = _demo_as_written(tmp_path, tolerance_m)
     tan = math.tan(math.radians(30.0))
     margins = []
     for stop, (lat, lon, amsl) in zip(stops, flown.waypoints, strict=True):
