@@ -36,8 +36,10 @@ from urpt_gcs.site.inputs import MISSION_FILE_MAX_BYTES, read_capped
 __all__ = [
     "SAME_PLACE_DEG",
     "check_missions",
+    "flies",
     "mission_digests",
     "mission_sha256",
+    "sortie_of",
     "summary_warning",
 ]
 
@@ -62,7 +64,7 @@ def mission_digests(files: Mapping[str, str | bytes]) -> dict[str, str]:
     }
 
 
-def _sortie(path: Path) -> int | None:
+def sortie_of(path: Path) -> int | None:
     """The sortie a mission file is by its name: ``mission`` 1, ``mission_<k>`` k."""
     if not PLAN_STEM.fullmatch(path.stem):
         return None
@@ -93,7 +95,7 @@ def _stops(summary: dict[str, Any], sortie: int) -> list[tuple[float, float]] | 
         return None
 
 
-def _flies(mission: Mission, stops: list[tuple[float, float]]) -> bool:
+def flies(mission: Mission, stops: list[tuple[float, float]]) -> bool:
     """Whether the mission's photo waypoints are these stops, in this order."""
     flown = photo_positions(mission)
     return len(flown) == len(stops) and all(
@@ -130,12 +132,12 @@ def summary_warning(path: Path, mission: Mission) -> str | None:
         One line naming the file and the summary; None when they agree, or when there is no
         single plan's summary beside it to ask.
     """
-    sortie = _sortie(path)
+    sortie = sortie_of(path)
     summary = _summary(path.parent) if sortie is not None else None
     if summary is None or sortie is None:
         return None
     stops = _stops(summary, sortie)
-    if stops is None or _flies(mission, stops):
+    if stops is None or flies(mission, stops):
         return None
     return (
         f"'{path}' does not fly the stops '{path.parent / SUMMARY_NAME}' plans for it: it is "
@@ -230,13 +232,13 @@ def _check_mission(
         raise MissionFileError(
             f"'{path}' is not the mission '{top}' records for {vehicle.name} ({what}): {_FIX}"
         )
-    sortie = _sortie(path)
+    sortie = sortie_of(path)
     own = owns[vehicle.number]
     stops = None if own is None or sortie is None else _stops(own, sortie)
     if stops is None or sortie is None:
         return
     mission = read_mission(path, flag="urpt-gcs upload --fleet")
-    if _flies(mission, stops):
+    if flies(mission, stops):
         return
     whose = [
         f"{v.name}'s sortie {k}"
@@ -245,7 +247,7 @@ def _check_mission(
         for k in range(1, len(v.missions) + 1)
         if (v.number, k) != (vehicle.number, sortie)
         and (theirs := _stops(other, k)) is not None
-        and _flies(mission, theirs)
+        and flies(mission, theirs)
     ]
     what = f"it flies {whose[0]}" if whose else _difference(photo_positions(mission), stops)
     raise MissionFileError(

@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from urpt_gcs.files.formats.qgc_plan import read_replay_check
-from urpt_gcs.flight.mission import Mission, photo_positions
+from urpt_gcs.files.plan_check import SAME_PLACE_DEG, flies, sortie_of
+from urpt_gcs.flight.mission import Mission
 from urpt_gcs.replay.band_track import band_of_summary
 from urpt_gcs.site.camera import Frame
 from urpt_gcs.site.targets import Target, read_targets
@@ -44,8 +45,6 @@ __all__ = [
 # What a replay checks when neither the mission nor a flag says.
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_MIN_CLEARANCE_M = 10.0
-# A summary's stop describes a waypoint if they agree to this (both on MAVLink's 1e-7 grid).
-SAME_PLACE_DEG = 1e-9
 SUMMARY_FILE = "summary.json"
 # A target of --targets is where the plan put it if they agree to this (about 10 cm).
 SAME_TARGET_DEG = 1e-6
@@ -161,31 +160,12 @@ def expected_checks(
     )
 
 
-def _sortie_number(path: Path) -> int | None:
-    """The sortie a mission file is by its name: ``mission`` 1, ``mission_<k>`` k."""
-    stem = path.stem
-    if stem == "mission":
-        return 1
-    if stem.startswith("mission_") and stem[len("mission_") :].isdigit():
-        return int(stem[len("mission_") :])
-    return None
-
-
-def _describes(stops: list[tuple[float, float]], mission: Mission) -> bool:
-    """Whether a summary's stops of a sortie are the mission's photo waypoints."""
-    flown = photo_positions(mission)
-    return len(stops) == len(flown) and all(
-        abs(a - c) <= SAME_PLACE_DEG and abs(b - d) <= SAME_PLACE_DEG
-        for (a, b), (c, d) in zip(stops, flown, strict=True)
-    )
-
-
 def _band_from_summary(
     path: Path, mission: Mission, warnings: list[str]
 ) -> tuple[float, float] | None:
     """The height band of the ``summary.json`` beside a mission file, if it describes it."""
     summary_path = path.parent / SUMMARY_FILE
-    number = _sortie_number(path)
+    number = sortie_of(path)
     if number is None or not summary_path.is_file():
         return None
     try:
@@ -204,7 +184,7 @@ def _band_from_summary(
             "against one"
         )
         return None
-    if not _describes(stops, mission):
+    if not flies(mission, stops):
         return None
     return band
 
@@ -231,7 +211,7 @@ def _from_summary(
     """The camera, clearance and target names for a .waypoints from the summary beside it,
     and whether it is the plan's only sortie."""
     summary_path = path.parent / SUMMARY_FILE
-    number = _sortie_number(path)
+    number = sortie_of(path)
     if not summary_path.is_file() or number is None:
         return None, "", None, False
     fallback = "checking every target of --targets at --fov instead: plan again to fix it"
@@ -246,7 +226,7 @@ def _from_summary(
         return None, "", None, False
     # The summary's stops are the photo waypoints: a band plan's missions also fly through
     # waypoints without a photo that follow the terrain.
-    if not _describes(placed, mission):
+    if not flies(mission, placed):
         warnings.append(
             f"'{summary_path}' does not describe {path.name} (its sortie {number} has other "
             f"stops); {fallback}"
