@@ -6,7 +6,7 @@ the exit status is 1. Usage errors (unknown flags, a word where a number belongs
 
 from __future__ import annotations
 
-from urpt_gcs.cli import batch, bench, plan, vehicle
+from urpt_gcs.cli import batch, bench, flown, plan, vehicle
 from urpt_gcs.cli._root import main
 
-__all__ = ["batch", "bench", "main", "plan", "vehicle"]
+__all__ = ["batch", "bench", "flown", "main", "plan", "vehicle"]

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import click
 
 from urpt_gcs.cli._root import main, upload_and_report
+from urpt_gcs.cli.flown import log_option
 from urpt_gcs.cli.options import out_option, setting_options
 from urpt_gcs.errors import SettingsError
 from urpt_gcs.pipeline.options import FLEET_OPTIONS, PLAN_OPTIONS, Option
@@ -44,10 +45,8 @@ def _refuse_fleet(o: Option, value: str) -> object:
 
 
 @main.command("plan")
-@click.option("--dem", "dem", required=True, help="DSM/DEM GeoTIFF of the site (e.g. from Pix4D).")
-@click.option(
-    "--targets", "targets", required=True, help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon)."
-)
+@click.option("--dem", "dem", help="DSM/DEM GeoTIFF of the site (e.g. from Pix4D).")
+@click.option("--targets", "targets", help="Targets: KML/KMZ, GeoJSON or CSV (name,lat,lon).")
 @setting_options(
     PLAN_OPTIONS,
     _refuse_plan,
@@ -88,9 +87,17 @@ def _refuse_fleet(o: Option, value: str) -> object:
     show_default=True,
     help="With --upload: whole uploads tried again after a failure.",
 )
+@click.option(
+    "--resume",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Plan only the targets of this earlier plan's folder that the --log flights did not "
+    "photograph, with its own settings, home and DSM.",
+)
+@log_option("With --resume: a log of a flight of that plan (.tlog or DataFlash .bin).")
 def plan_command(
-    dem: str,
-    targets: str,
+    dem: str | None,
+    targets: str | None,
     out: str,
     altitude_steps: int,
     as_json: bool,
@@ -99,9 +106,22 @@ def plan_command(
     do_upload: bool,
     connect: str,
     retries: int,
+    resume: Path | None,
+    logs: tuple[Path, ...],
     **options: Any,
 ) -> None:
     """Plan the shortest flight that photographs every target; write .plan, .waypoints, summary."""
+    if resume is not None:
+        if do_upload:
+            raise SettingsError("--upload with --resume: upload the new plan with urpt-gcs upload")
+        _plan_resumed(resume, logs, dem, targets, out, options, as_json, quiet)
+        return
+    if logs:
+        raise SettingsError("--log belongs to --resume OUT: give the folder of the plan it flew")
+    for flag, named in (("--dem", dem), ("--targets", targets)):
+        if named is None:
+            raise click.UsageError(f"Missing option '{flag}' (or give --resume OUT --log FLIGHT).")
+    assert dem is not None and targets is not None
     from urpt_gcs.files.fleet_output import check_fleet_out
     from urpt_gcs.files.output import refuse_inputs
     from urpt_gcs.files.products import check_extra, check_out, write_products
@@ -194,6 +214,68 @@ def plan_command(
 
         fence = Geofence.inclusion(result.geofence_latlon)
         upload_and_report(result.missions[0], connect, retries, 10.0, quiet or as_json, fence)
+
+
+def _plan_resumed(
+    resume: Path,
+    logs: tuple[Path, ...],
+    dem: str | None,
+    targets: str | None,
+    out: str,
+    options: Mapping[str, Any],
+    as_json: bool,
+    quiet: bool,
+) -> None:
+    """``plan --resume``: the targets of an earlier plan its flights missed, planned with its
+    own settings and home, into ``out``."""
+    from dataclasses import replace
+
+    from urpt_gcs.files.output import refuse_inputs
+    from urpt_gcs.files.products import check_out, write_products
+    from urpt_gcs.files.report import summary_text
+    from urpt_gcs.pipeline.planner import plan
+    from urpt_gcs.pipeline.settings import settings_from_record
+    from urpt_gcs.replay.flown import judge_flown, plan_dem, plan_summary, remaining_targets
+
+    context = click.get_current_context()
+    for o in (*PLAN_OPTIONS, *FLEET_OPTIONS):
+        given = context.get_parameter_source(o.key.replace("-", "_"))
+        if o.key != "no-map" and given == click.core.ParameterSource.COMMANDLINE:
+            raise SettingsError(
+                f"{o.flag} with --resume: the plan re-flies with {resume}'s own settings; drop "
+                f"{o.flag}, or plan the targets afresh with --dem and --targets"
+            )
+    summary = plan_summary(resume)
+    settings = settings_from_record(summary.get("settings") or {}, f"'{resume / 'summary.json'}'")
+    home = summary["home"]
+    settings = replace(settings, home=(home["lat_deg"], home["lon_deg"]))
+    dem_path = plan_dem(summary, None if dem is None else Path(dem))
+    destination = check_out(Path(out))
+    inputs: dict[str, Path | str] = {f"--log {log}": log for log in logs}
+    inputs["--dem"] = dem_path
+    inputs["--resume"] = resume / "summary.json"
+    if targets is not None:
+        inputs["--targets"] = targets
+    refuse_inputs([destination], inputs)
+    flown = judge_flown(resume, logs, dem_path, None if targets is None else Path(targets))
+    if not flown.missed:
+        if not quiet:
+            click.echo(
+                f"every target of {resume} was photographed in the logs given: nothing to re-fly"
+            )
+        return
+    live = sys.stderr.isatty()
+    stream = sys.stderr if live else sys.stdout
+    with StageProgress(stream, settings.solve.time_limit_s, live=live) as progress:
+        say = None if quiet or as_json else progress
+        if say is not None:
+            say(f"re-planning the {len(flown.missed)} targets not photographed")
+        result = plan(dem_path, remaining_targets(flown), settings, progress=say)
+        data = write_products(result, destination, with_map=not options["no_map"])
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+    elif not quiet:
+        click.echo(summary_text(data))
 
 
 def _fleet(values: Mapping[str, Any]) -> FleetSettings | None:

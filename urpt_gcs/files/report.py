@@ -18,6 +18,7 @@ from urpt_gcs.files.band_report import (
 )
 from urpt_gcs.flight.mission import photo_headings, photo_positions
 from urpt_gcs.pipeline.result import Plan
+from urpt_gcs.pipeline.settings import settings_record
 from urpt_gcs.site.dem import crs_label
 
 
@@ -210,6 +211,9 @@ def summary(plan: Plan, files: list[str] | None = None) -> dict[str, Any]:
         "stops": stops,
         "timings_s": {k: round(v, 3) for k, v in plan.timings_s.items()},
         "warnings": list(plan.warnings),
+        # Every setting the plan was made with, so that a later plan can use them again
+        # (``plan --resume``).
+        "settings": settings_record(plan.settings),
         "files": files or [],
         **_frame_camera(plan),
         **_altitude_curve(plan),

@@ -101,7 +101,7 @@ class PlanArea:
     camera: Camera
 
 
-def read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> SiteInputs:
+def read_site(dem_path: Path, targets_path: Path | TargetSet, settings: PlanSettings) -> SiteInputs:
     """Read the targets and the DEM's description; place them in the planning CRS.
 
     Parameters
@@ -109,7 +109,7 @@ def read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> Sit
     dem_path
         GeoTIFF DSM/DEM of the site.
     targets_path
-        KML/KMZ, GeoJSON or CSV of the targets.
+        KML/KMZ, GeoJSON or CSV of the targets, or the targets already read.
     settings
         The plan's settings (``home``, ``band``, ``samples`` for the memory check).
 
@@ -124,7 +124,7 @@ def read_site(dem_path: Path, targets_path: Path, settings: PlanSettings) -> Sit
         A target file or DEM that cannot be read, a point off the DEM or with lat and lon
         swapped, or more targets than the memory budget holds.
     """
-    targets = read_targets(targets_path)
+    targets = targets_path if isinstance(targets_path, TargetSet) else read_targets(targets_path)
     # Every target offers its nadir and a viewpoint per azimuth, each seeing at least its own
     # target, and the tour records which targets each stop sees (a stop per target at most):
     # refuse, before any work, a target count whose instance and tour could not fit.

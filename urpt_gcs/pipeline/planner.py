@@ -36,6 +36,7 @@ from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.pipeline.stages import Stages, solve_stage
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.progress import Progress
+from urpt_gcs.site.targets import TargetSet
 from urpt_gcs.solvers import Tour
 from urpt_gcs.visibility.cover import build_instance
 from urpt_gcs.visibility.regions import Region, visibility_regions
@@ -43,7 +44,7 @@ from urpt_gcs.visibility.regions import Region, visibility_regions
 
 def plan(
     dem_path: Path,
-    targets_path: Path,
+    targets_path: Path | TargetSet,
     settings: PlanSettings | None = None,
     progress: Progress | None = None,
 ) -> Plan:
@@ -54,7 +55,8 @@ def plan(
     dem_path
         GeoTIFF DSM/DEM of the site.
     targets_path
-        KML/KMZ, GeoJSON or CSV of the targets (a point named Home or Launch is the take-off).
+        KML/KMZ, GeoJSON or CSV of the targets (a point named Home or Launch is the take-off),
+        or the targets already read.
     settings
         Camera, flight plane, solver and mission choices; defaults if omitted.
     progress

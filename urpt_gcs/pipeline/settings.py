@@ -8,6 +8,7 @@ a jobs file its key (:meth:`urpt_gcs.errors.SettingsError.naming`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from collections.abc import Mapping
@@ -39,6 +40,8 @@ __all__ = [
     "VehicleSpec",
     "plan_settings",
     "read_fleet",
+    "settings_from_record",
+    "settings_record",
 ]
 
 # The most vehicles one fleet plan shares the targets among: the split's search and the
@@ -244,6 +247,44 @@ class FleetSettings:
     def min_m(self) -> float:
         """The separation required: vertical spacing, or horizontal distance in time mode."""
         return self.layer_spacing_m if self.separation == "altitude" else self.min_separation_m
+
+
+def settings_record(settings: PlanSettings) -> dict[str, Any]:
+    """``settings`` as JSON-ready values, field by field (``summary.json``'s ``settings``)."""
+    return dataclasses.asdict(settings)
+
+
+def settings_from_record(record: Mapping[str, Any], source: str) -> PlanSettings:
+    """The settings :func:`settings_record` wrote, read back.
+
+    Raises
+    ------
+    SettingsError
+        One line naming ``source`` when the record is not one this version wrote.
+    """
+    fix = "plan it again with this version of urpt-gcs"
+    if not isinstance(record, Mapping):
+        raise SettingsError(f"{source} records no settings: {fix}")
+    known = {f.name for f in dataclasses.fields(PlanSettings)}
+    unknown = sorted(set(record) - known)
+    if unknown:
+        raise SettingsError(
+            f"{source} records settings this version does not know ({unknown[0]}): {fix}"
+        )
+    values = dict(record)
+    try:
+        values["solve"] = SolveSettings(**record.get("solve", {}))
+        values["mission"] = MissionSettings(**record.get("mission", {}))
+        if record.get("frame") is not None:
+            values["frame"] = Frame(**record["frame"])
+        for name in ("agl_band_m", "home"):
+            if record.get(name) is not None:
+                values[name] = tuple(record[name])
+        return PlanSettings(**values)
+    except (TypeError, ValueError) as exc:
+        raise SettingsError(
+            f"{source} records settings that cannot be used ({exc}): {fix}"
+        ) from None
 
 
 def plan_settings(values: Mapping[str, Any]) -> PlanSettings:

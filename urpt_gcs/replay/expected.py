@@ -28,7 +28,7 @@ from urpt_gcs.files.plan_check import SAME_PLACE_DEG, flies, sortie_of
 from urpt_gcs.flight.mission import Mission
 from urpt_gcs.replay.band_track import band_of_summary
 from urpt_gcs.site.camera import Frame
-from urpt_gcs.site.targets import Target, read_targets
+from urpt_gcs.site.targets import Target, TargetSet, read_targets
 
 __all__ = [
     "DEFAULT_FOV_DEG",
@@ -40,6 +40,7 @@ __all__ = [
     "Unplanned",
     "chosen_targets",
     "expected_checks",
+    "target_set",
 ]
 
 # What a replay checks when neither the mission nor a flag says.
@@ -239,8 +240,16 @@ def _from_summary(
     return planned, where, names, sorties == 1
 
 
+def target_set(targets: Path | TargetSet) -> TargetSet:
+    """The targets of a file, or the ones given."""
+    return targets if isinstance(targets, TargetSet) else read_targets(targets)
+
+
 def chosen_targets(
-    expected: Expected, targets_path: Path, problems: list[str], every_target: bool = False
+    expected: Expected,
+    targets_path: Path | TargetSet,
+    problems: list[str],
+    every_target: bool = False,
 ) -> tuple[list[Target], dict[str, Unplanned]]:
     """The targets to judge, and those of them the plan was not made for.
 
@@ -249,7 +258,7 @@ def chosen_targets(
     expected
         What the mission names: its own targets, the file's by name, or none (the file's all).
     targets_path
-        ``--targets``.
+        ``--targets``, or the targets already read.
     problems
         Receives a line for each target named that the file lacks.
     every_target
@@ -262,7 +271,8 @@ def chosen_targets(
         The targets in the plan's order, then the file's others; by name, "extra" for a
         target the plan does not name and "moved" for one the file puts elsewhere.
     """
-    every = read_targets(targets_path).targets
+    given = target_set(targets_path)
+    every = given.targets
     if expected.targets is None and expected.names is None:
         return list(every), {}
     by_name = {t.name: t for t in every}
@@ -272,7 +282,7 @@ def chosen_targets(
         assert expected.names is not None
         missing = [n for n in expected.names if n not in by_name]
         problems.extend(
-            f"target {name} of {expected.source} is not in '{targets_path}': give the target "
+            f"target {name} of {expected.source} is not in '{given.source}': give the target "
             "file the plan was made from"
             for name in missing
         )

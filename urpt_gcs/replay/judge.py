@@ -47,12 +47,13 @@ from urpt_gcs.replay.expected import (
     Unplanned,
     chosen_targets,
     expected_checks,
+    target_set,
 )
 from urpt_gcs.replay.record import Flight
 from urpt_gcs.site.camera import Frame, grid_bearing_deg
 from urpt_gcs.site.dem import WGS84, open_dem, planning_crs
 from urpt_gcs.site.reading import read_terrain
-from urpt_gcs.site.targets import read_targets
+from urpt_gcs.site.targets import TargetSet
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import in_frame, line_of_sight
 from urpt_gcs.visibility.segments import segment_profile
@@ -145,7 +146,7 @@ def judge(
     flight: Flight,
     mission: Mission,
     dem_path: Path,
-    targets_path: Path,
+    targets_path: Path | TargetSet,
     expected: Expected,
     plan_name: str,
     every_target: bool = False,
@@ -186,16 +187,17 @@ def judge(
     )
     seen = tuple(replace(row, unplanned=unplanned.get(row.name, "")) for row in seen)
     plan_file = Path(plan_name).name
+    named = targets_path.source if isinstance(targets_path, TargetSet) else str(targets_path)
     fix = "plan again with this target file, or give the one the plan was made from"
     for row in (r for r in seen if r.photo is None):
         if row.unplanned == "extra":
             problems.append(
-                f"target {row.name} of '{targets_path}' is not one {plan_file} was planned to "
+                f"target {row.name} of '{named}' is not one {plan_file} was planned to "
                 f"photograph, and no photo sees it: {fix}"
             )
         elif row.unplanned == "moved":
             problems.append(
-                f"target {row.name} of '{targets_path}' is not where {plan_file} was planned to "
+                f"target {row.name} of '{named}' is not where {plan_file} was planned to "
                 f"photograph it, and no photo sees it there: {fix}"
             )
         else:
@@ -300,10 +302,12 @@ class SetReport:
         return not self.problems and all(r.ok for r in self.reports)
 
 
-def judge_set(reports: Sequence[ReplayReport], dem_path: Path, targets_path: Path) -> SetReport:
-    """Judge the photos of all ``reports`` together on every target of ``targets_path``,
-    each photo at its own flight's camera."""
-    targets = list(read_targets(targets_path).targets)
+def judge_set(
+    reports: Sequence[ReplayReport], dem_path: Path, targets_path: Path | TargetSet
+) -> SetReport:
+    """Judge the photos of all ``reports`` together on every target of ``targets_path`` (a
+    target file, or targets already read), each photo at its own flight's camera."""
+    targets = list(target_set(targets_path).targets)
     photos = [(r, p) for r in reports for p in r.flight.photos]
     info, crs, to_xy = _site(
         dem_path,
@@ -413,10 +417,13 @@ def report_text(report: ReplayReport) -> str:
     flight = report.flight
     upload = flight.upload
     ratio = flight.sim_time_s / flight.wall_time_s if flight.wall_time_s > 0 else math.nan
-    lines = [
-        f"replay of {report.plan} on {flight.vehicle.describe()}",
-        f"  upload    {upload.items} items verified in {upload.elapsed_s:.2f} s "
-        f"({upload.attempts} attempt{'s' if upload.attempts != 1 else ''})",
+    lines = [f"replay of {report.plan} on {flight.vehicle.describe()}"]
+    if upload is not None:
+        lines.append(
+            f"  upload    {upload.items} items verified in {upload.elapsed_s:.2f} s "
+            f"({upload.attempts} attempt{'s' if upload.attempts != 1 else ''})"
+        )
+    lines += [
         f"  flight    {flight.sim_time_s:.1f} s simulated in {flight.wall_time_s:.1f} s wall "
         f"({ratio:.0f}x)",
         f"  checks    {_checks_line(report)}",

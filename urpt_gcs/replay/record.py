@@ -69,10 +69,11 @@ class Flight:
     """What the ground station saw of one flight.
 
     ``sim_time_s`` is the vehicle's clock from arming to the disarm after landing,
-    ``wall_time_s`` the wall clock over the same span.
+    ``wall_time_s`` the wall clock over the same span. ``upload`` is None for a flight read
+    from a log (:mod:`urpt_gcs.replay.flightlog`), whose upload this tool did not see.
     """
 
-    upload: UploadReport
+    upload: UploadReport | None
     photos: tuple[PhotoFix, ...]
     track: tuple[TrackPoint, ...]
     sim_time_s: float
