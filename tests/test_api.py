@@ -12,6 +12,7 @@ PUBLIC = {
     "DemError",
     "FleetPlan",
     "FleetSettings",
+    "FlownReport",
     "IdleVehicle",
     "JobsFileError",
     "LinkError",
@@ -31,8 +32,10 @@ PUBLIC = {
     "UrptError",
     "VehicleSpec",
     "__version__",
+    "judge_flown",
     "plan",
     "plan_fleet",
+    "remaining_targets",
     "upload",
     "write_outputs",
 }

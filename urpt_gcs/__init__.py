@@ -9,6 +9,8 @@ The public API, everything the command line does, as calls:
   written into a folder as one set;
 - :func:`upload`: one :class:`Mission` to a vehicle through MAVSDK, read back and compared
   item by item (:class:`UploadSettings`, :class:`UploadReport`);
+- :func:`judge_flown`: what real flights of a plan photographed, from their logs
+  (:class:`FlownReport`), and :func:`remaining_targets` to plan the rest;
 - the errors, all rooted at :class:`UrptError`.
 
 The stages behind them are packages of their own, in pipeline order: ``site`` (inputs,
@@ -53,6 +55,7 @@ if TYPE_CHECKING:
     from urpt_gcs.pipeline.planner import plan
     from urpt_gcs.pipeline.result import Plan
     from urpt_gcs.pipeline.settings import FleetSettings, PlanSettings, VehicleSpec
+    from urpt_gcs.replay.flown import FlownReport, judge_flown, remaining_targets
     from urpt_gcs.solvers import SolveSettings, Tour
     from urpt_gcs.vehicle.link import UploadReport, UploadSettings, upload
 
@@ -74,6 +77,9 @@ _LAZY = {
     "Tour": "urpt_gcs.solvers",
     "UploadSettings": "urpt_gcs.vehicle.link",
     "UploadReport": "urpt_gcs.vehicle.link",
+    "judge_flown": "urpt_gcs.replay.flown",
+    "FlownReport": "urpt_gcs.replay.flown",
+    "remaining_targets": "urpt_gcs.replay.flown",
 }
 
 __all__ = [
@@ -81,6 +87,7 @@ __all__ = [
     "DemError",
     "FleetPlan",
     "FleetSettings",
+    "FlownReport",
     "IdleVehicle",
     "JobsFileError",
     "LinkError",
@@ -100,8 +107,10 @@ __all__ = [
     "UrptError",
     "VehicleSpec",
     "__version__",
+    "judge_flown",
     "plan",
     "plan_fleet",
+    "remaining_targets",
     "upload",
     "write_outputs",
 ]
