@@ -6,6 +6,9 @@ BIN := $(VENV)/bin
 
 .PHONY: demo test demo-site clean
 
+# The browser the tests of map.html drive (tests/files/test_map_page.py): Debian's package.
+CHROMIUM := /usr/bin/chromium
+
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
@@ -18,11 +21,24 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@ $(VENV)/.installed
 
+# Chromium for those tests, installed with apt-get where it is missing and apt-get can run
+# (as root); where it cannot, the build goes on and the browser tests skip, saying why. The
+# stamp is left only once Chromium is there, so a later run tries again.
+$(VENV)/.chromium: | $(BIN)/python
+	@if [ ! -x $(CHROMIUM) ] && command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+		echo "installing chromium with apt-get for the browser tests of map.html"; \
+		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+			apt-get install -y -qq chromium; } >/dev/null 2>&1 \
+			|| echo "apt-get could not install chromium: the browser tests will skip"; \
+	fi
+	@if [ -x $(CHROMIUM) ]; then touch $@; \
+	else echo "no Chromium at $(CHROMIUM): the browser tests of map.html will skip"; fi
+
 demo: $(VENV)/.installed
 	$(BIN)/urpt-gcs plan --dem missions/demo/site.tif --targets missions/demo/targets.kml \
 		--out missions/demo/out
 
-test: $(VENV)/.installed-test
+test: $(VENV)/.installed-test $(VENV)/.chromium
 	$(BIN)/ruff check urpt_gcs tests
 	$(BIN)/ruff format --check urpt_gcs tests
 	$(BIN)/mypy

@@ -79,6 +79,7 @@ def test_good_run_writes_every_output(site: dict[str, Path]) -> None:
     assert data["targets"] == 2
     assert data["home"]["source"] == "placemark 'Home'"
     assert sorted(p.name for p in out.iterdir()) == [
+        "map.html",
         "map.png",
         "mission.plan",
         "mission.waypoints",

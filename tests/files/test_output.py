@@ -89,14 +89,14 @@ def test_sorties_after_one_sortie_leave_no_mission_plan(tmp_path: Path) -> None:
     assert code == 1 and "mission.plan" in stderr
 
 
-def test_no_map_after_a_map_run_removes_map_png(tmp_path: Path) -> None:
+def test_no_map_after_a_map_run_removes_map_png_and_map_html(tmp_path: Path) -> None:
     out = tmp_path / "out"
     code, stderr = _cli(_plan_args(out, "--time-limit", "0.5"))
     assert code == 0, stderr
-    assert (out / "map.png").is_file()
+    assert (out / "map.png").is_file() and (out / "map.html").is_file()
     code, stderr = _cli(_plan_args(out, "--time-limit", "0.5", "--no-map"))
     assert code == 0, stderr
-    assert not (out / "map.png").exists()
+    assert not (out / "map.png").exists() and not (out / "map.html").exists()
     assert temporaries(tmp_path) == []
 
 
@@ -110,10 +110,13 @@ def test_foreign_files_survive_and_only_plan_outputs_are_replaced(
     (out / "photos").mkdir()
     (out / "photos" / "mission.plan").write_text("not ours: inside a subfolder\n")
     foreign = {k: v for k, v in tree(out).items() if k.startswith(("notes", "mission-", "photos"))}
+    (out / "flown.json").write_text("{}\n")
     write_products(sorties, out, with_map=False)
     after = tree(out)
     assert {k: after[k] for k in foreign} == foreign
     assert "mission.plan" not in after
+    # The earlier plan's flight report is not this plan's.
+    assert "flown.json" not in after
     assert temporaries(tmp_path) == []
 
 

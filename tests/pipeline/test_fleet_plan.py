@@ -362,7 +362,8 @@ def test_demo_fleet_sees_every_target_from_distinct_layers(tmp_path: Path, count
     assert {r["vehicle"] for r in routes} == set(range(1, count + 1))
     colours = {r["vehicle"]: r["colour"] for r in routes}
     assert len(set(colours.values())) == count
-    assert ((tmp_path / "out" / "map.png").exists()) == (count == 2)
+    for name in ("map.png", "map.html"):
+        assert ((tmp_path / "out" / name).exists()) == (count == 2)
     kml = ET.parse(tmp_path / "out" / "plan.kml").getroot()
     q = "{http://www.opengis.net/kml/2.2}"
     folders = {f.findtext(f"{q}name") for f in kml.iter(f"{q}Folder")}

@@ -118,7 +118,7 @@ class Job:
     settings
         The plan's settings.
     with_map
-        Draw ``map.png``.
+        Draw ``map.png`` and ``map.html``.
     sweep
         The swept settings of this job (``altitude``, ``camera``, ``fov``), for the results.
     out

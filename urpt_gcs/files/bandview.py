@@ -19,11 +19,27 @@ from urpt_gcs.files.band_report import band_stops, path_profile
 from urpt_gcs.files.report import sortie_colour
 from urpt_gcs.pipeline.result import Plan
 
-__all__ = ["PROFILE_ROW_IN", "draw_band_stops", "draw_profiles", "profile_grid", "title_lines"]
+__all__ = [
+    "BAND_COLOUR",
+    "BAND_EDGE_COLOUR",
+    "GROUND_COLOUR",
+    "PROFILE_ROW_IN",
+    "SURFACE_COLOUR",
+    "draw_band_stops",
+    "draw_profiles",
+    "profile_grid",
+    "title_lines",
+]
 
 # Height of a row of profile panels, in inches.
 PROFILE_ROW_IN = 2.6
 _HEIGHT_CMAP = "viridis"
+# The profile's colours: the band over the surface and its limits, the ground under the
+# surface, and the surface's line.
+BAND_COLOUR = "#6baed6"
+BAND_EDGE_COLOUR = "#3182bd"
+GROUND_COLOUR = "#a1887f"
+SURFACE_COLOUR = "#5d4037"
 
 
 def profile_grid(sorties: int) -> tuple[int, int]:
@@ -92,12 +108,12 @@ def draw_profiles(axes: list[Any], plan: Plan) -> None:
         profile = path_profile(plan, k)
         at, surface = profile["at_m"], profile["surface_m"]
         ax.fill_between(
-            at, surface + floor, surface + ceiling, color="#6baed6", alpha=0.3, lw=0, label="band"
+            at, surface + floor, surface + ceiling, color=BAND_COLOUR, alpha=0.3, lw=0, label="band"
         )
-        ax.plot(at, surface + floor, color="#3182bd", linewidth=0.6)
-        ax.plot(at, surface + ceiling, color="#3182bd", linewidth=0.6)
-        ax.fill_between(at, np.nanmin(surface) - 0.05 * ceiling, surface, color="#a1887f")
-        ax.plot(at, surface, color="#5d4037", linewidth=0.9, label="surface")
+        ax.plot(at, surface + floor, color=BAND_EDGE_COLOUR, linewidth=0.6)
+        ax.plot(at, surface + ceiling, color=BAND_EDGE_COLOUR, linewidth=0.6)
+        ax.fill_between(at, np.nanmin(surface) - 0.05 * ceiling, surface, color=GROUND_COLOUR)
+        ax.plot(at, surface, color=SURFACE_COLOUR, linewidth=0.9, label="surface")
         distance, z, stop = profile["distance_m"], profile["z_m"], profile["stop"]
         colour = sortie_colour(k + 1)
         # The climb from home and the landing back on it.

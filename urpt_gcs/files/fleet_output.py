@@ -5,7 +5,8 @@
 ``fleet`` block (every vehicle's layer, home, speed, flight time, length, sorties, targets,
 start delay and the SHA-256 of each of its mission files as written; the makespan, its lower
 bound and gap; the separation and the planned closest approach), and ``OUT/map.png``,
-``OUT/plan.kml`` and ``OUT/plan.geojson`` show every vehicle in its own colour. Everything is
+``OUT/map.html``, ``OUT/plan.kml`` and ``OUT/plan.geojson`` show every vehicle in its own
+colour. Everything is
 committed as one set: all of it appears, or none. A vehicle left idle has ``"idle": true``,
 why in ``"idle_reason"``, no targets, no sorties, and an empty folder (the products of an
 earlier plan in it are removed with the rest of the earlier set).
@@ -22,11 +23,18 @@ from typing import Any
 from urpt_gcs.files.formats.geo import fleet_geojson, fleet_kml
 from urpt_gcs.files.output import Destination, commit
 from urpt_gcs.files.plan_check import mission_digests
-from urpt_gcs.files.products import MAP_FILE, SUMMARY_FILE, check_out, render_products
+from urpt_gcs.files.products import (
+    MAP_FILE,
+    MAP_PAGE_FILE,
+    SUMMARY_FILE,
+    check_out,
+    render_products,
+)
 from urpt_gcs.pipeline.fleet import FleetPlan, IdleVehicle
 
 __all__ = [
     "check_fleet_out",
+    "fleet_map_title",
     "fleet_summary",
     "fleet_summary_text",
     "vehicle_dir",
@@ -241,29 +249,39 @@ def write_fleet_products(
     """
     *folders, top = destinations
     writes: list[tuple[Destination, dict[str, str | bytes]]] = []
+    summaries: list[dict[str, Any] | None] = []
     listed: list[str] = []
     for plan, dest in zip(fleet.flying, folders, strict=True):
         # A vehicle left idle gets an empty set: an earlier plan's mission there is removed.
-        files = {} if plan is None else render_products(plan, dest.folder, with_map)[1]
+        data, files = (None, {}) if plan is None else render_products(plan, dest.folder, with_map)
         writes.append((dest, files))
+        summaries.append(data)
         listed += [str(dest.folder / name) for name in files]
     own = {"plan.kml": fleet_kml(fleet.flying), "plan.geojson": fleet_geojson(fleet.flying)}
-    names = [*own, SUMMARY_FILE] + ([MAP_FILE] if with_map else [])
+    names = [*own, SUMMARY_FILE] + ([MAP_FILE, MAP_PAGE_FILE] if with_map else [])
     rendered = [files for _dest, files in writes]
     data = fleet_summary(fleet, [str(top.folder / n) for n in names] + listed, rendered)
     top_files: dict[str, str | bytes] = {**own, SUMMARY_FILE: json.dumps(data, indent=2) + "\n"}
     if with_map:
-        # matplotlib loads only when a map is drawn.
+        # matplotlib and Bokeh load only when a map is drawn.
+        from urpt_gcs.files.mappage import render_fleet_page
         from urpt_gcs.files.mapview import render_fleet_map
 
-        f = data["fleet"]
-        gap = "" if f["makespan_gap_pct"] is None else f", gap {f['makespan_gap_pct']:.1f} %"
-        title = (
-            f"{len(fleet.plans)} vehicles, {data['targets']} targets: makespan "
-            f"{f['makespan_s'] / 60:.1f} min (bound {f['makespan_bound_s'] / 60:.1f} min{gap})\n"
-            f"separation: {f['separation']['mode']}, closest approach "
-            f"{f['separation']['closest_approach_m']} m"
-        )
+        title = fleet_map_title(data)
         top_files[MAP_FILE] = render_fleet_map(fleet.flying, title)
+        top_files[MAP_PAGE_FILE] = render_fleet_page(fleet.flying, summaries, title)
     commit([*writes, (top, top_files)])
     return data
+
+
+def fleet_map_title(data: dict[str, Any]) -> str:
+    """The fleet map's title, two lines from :func:`fleet_summary`'s dictionary: the
+    makespan against its bound, then the separation."""
+    f = data["fleet"]
+    gap = "" if f["makespan_gap_pct"] is None else f", gap {f['makespan_gap_pct']:.1f} %"
+    return (
+        f"{len(f['vehicles'])} vehicles, {data['targets']} targets: makespan "
+        f"{f['makespan_s'] / 60:.1f} min (bound {f['makespan_bound_s'] / 60:.1f} min{gap})\n"
+        f"separation: {f['separation']['mode']}, closest approach "
+        f"{f['separation']['closest_approach_m']} m"
+    )

@@ -20,29 +20,39 @@ from typing import Any
 import numpy as np
 import pyproj
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import LightSource
+from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import FancyArrow
 from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.transforms import Affine2D
 
 from urpt_gcs.arrays import FloatArray
-from urpt_gcs.files.band_report import eye_heights_m
-from urpt_gcs.files.bandview import (
-    PROFILE_ROW_IN,
-    draw_band_stops,
-    draw_profiles,
-    profile_grid,
-    title_lines,
+from urpt_gcs.files.bandview import PROFILE_ROW_IN, draw_band_stops, draw_profiles, profile_grid
+from urpt_gcs.files.mapbase import (
+    BACKGROUND,
+    FENCE_COLOUR,
+    NODATA_ALPHA,
+    NODATA_COLOUR,
+    TINT_ALPHA,
+    TINT_CMAP,
+    display_step,
+    frame_footprints,
+    geofence_xy,
+    hillshade,
+    map_title,
+    map_transformer,
+    region_rings,
+    sortie_routes,
+    target_colours,
+    vehicle_label,
+    view_bounds,
+    widest_plan,
 )
-from urpt_gcs.files.report import flight_quality, flown_stops, sortie_colour
-from urpt_gcs.flight.mission import photo_positions, waypoint_positions
+from urpt_gcs.files.report import flown_stops, sortie_colour
+from urpt_gcs.flight.mission import photo_positions
 from urpt_gcs.pipeline.result import Plan
-from urpt_gcs.site.dem import WGS84
 from urpt_gcs.site.terrain import Terrain
 
-# Longest side of the raster drawn, in pixels; larger windows are decimated for display.
-_MAX_DISPLAY_PX = 1600
 # Text properties for words from the inputs: drawn as written, whatever the rcParams say.
 _PLAIN: dict[str, Any] = {"parse_math": False, "usetex": False}
 
@@ -54,32 +64,12 @@ def _nice_length(span_m: float) -> float:
     return float(next(k * power for k in (5, 2, 1) if k * power <= raw))
 
 
-def _hillshade(z: FloatArray, cell_m: float) -> FloatArray:
-    filled = np.where(np.isfinite(z), z, np.nanmean(z) if np.isfinite(z).any() else 0.0)
-    shade: FloatArray = LightSource(azdeg=315, altdeg=45).hillshade(
-        filled, vert_exag=1.0, dx=cell_m, dy=cell_m
-    )
-    return np.where(np.isfinite(z), shade, np.nan)
-
-
 def render_map(plan: Plan, data: dict[str, Any]) -> bytes:
     """A PNG of the plan, for the operator to check at a glance."""
     fig = map_figure(plan, data)
     out = io.BytesIO()
     fig.savefig(out, format="png")
     return out.getvalue()
-
-
-def sortie_routes(plan: Plan, to_map: pyproj.Transformer) -> list[FloatArray]:
-    """Each sortie as flown, in the planning CRS: home, its missions' waypoints (with a photo
-    or without), home."""
-    routes = []
-    for mission in plan.missions:
-        home = (mission.home.lat_deg, mission.home.lon_deg)
-        lat, lon = np.array([home, *waypoint_positions(mission), home]).T
-        x, y = to_map.transform(lon, lat)
-        routes.append(np.column_stack([x, y]))
-    return routes
 
 
 def _draw_sorties(ax: Any, plan: Plan, to_map: pyproj.Transformer) -> list[FloatArray]:
@@ -124,32 +114,6 @@ def _draw_sorties(ax: Any, plan: Plan, to_map: pyproj.Transformer) -> list[Float
     return routes
 
 
-def frame_footprints(plan: Plan) -> list[FloatArray]:
-    """Each photo's frame on the ground, in the planning CRS: the rectangle turned by the
-    stop's heading, at the mean ground height of the targets it is counted for (a frame
-    camera only; empty for the cone)."""
-    frame, tour = plan.camera.frame, plan.tour
-    if frame is None or tour.headings_deg is None or tour.points_xy is None:
-        return []
-    out = []
-    corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-    eyes = eye_heights_m(plan)
-    for k, (x, y) in enumerate(tour.points_xy):
-        seen = np.flatnonzero(tour.sees[k])
-        ground = float(plan.ground_m[seen].mean()) if seen.size else float(plan.ground_m.min())
-        h = float(eyes[k]) - ground
-        across, along = (
-            corners[:, 0] * h * frame.half_tan_across,
-            corners[:, 1] * h * frame.half_tan_along,
-        )
-        psi = math.radians(float(tour.headings_deg[k]))
-        # Across the heading is its right-hand side: (cos, -sin); along it (sin, cos).
-        dx = across * math.cos(psi) + along * math.sin(psi)
-        dy = -across * math.sin(psi) + along * math.cos(psi)
-        out.append(np.column_stack([x + dx, y + dy]))
-    return out
-
-
 def _draw_frames(ax: Any, plan: Plan) -> None:
     for k, ring in enumerate(frame_footprints(plan)):
         ax.add_patch(
@@ -166,19 +130,10 @@ def _draw_frames(ax: Any, plan: Plan) -> None:
         )
 
 
-def _camera_words(data: dict[str, Any]) -> str:
-    camera = data.get("camera")
-    if camera is None:
-        return f"camera ±{data['fov_deg']:g}°"
-    w, h = camera["sensor_mm"]
-    gsd = f", worst GSD {camera['worst_gsd_cm']:.2f} cm/px"
-    return f"frame {w:g}x{h:g} mm / {camera['focal_mm']:g} mm{gsd}"
-
-
 def _terrain_figure(terrain: Terrain, profiles: int = 0) -> tuple[Figure, Any, list[Any]]:
     """A figure with the DSM drawn hillshaded and tinted, in the planning CRS, and below it
     ``profiles`` empty panels (see :func:`~urpt_gcs.files.bandview.profile_grid`)."""
-    step = max(1, math.ceil(max(terrain.elevation_m.shape) / _MAX_DISPLAY_PX))
+    step = display_step(terrain)
     z = np.asarray(terrain.elevation_m[::step, ::step], dtype=np.float64)
     t = terrain.transform
     pixel_to_map = Affine2D.from_values(t.a * step, t.d * step, t.b * step, t.e * step, t.c, t.f)
@@ -190,20 +145,28 @@ def _terrain_figure(terrain: Terrain, profiles: int = 0) -> tuple[Figure, Any, l
     ax = fig.add_subplot(grid[0, :])
     panels = [fig.add_subplot(grid[1 + k // cols, k % cols]) for k in range(profiles)]
     ax.set_aspect("equal")
-    ax.set_facecolor("#eeeeee")
+    ax.set_facecolor(BACKGROUND)
 
     rows, cols = z.shape
     extent = (0.0, float(cols), float(rows), 0.0)
-    shade = np.ma.masked_invalid(_hillshade(z, terrain.cell_m * step))
+    shade = np.ma.masked_invalid(hillshade(z, terrain.cell_m * step))
     gray = ax.imshow(shade, cmap="gray", extent=extent, interpolation="nearest", vmin=0, vmax=1)
     gray.set_transform(pixel_to_map + ax.transData)
     tint = ax.imshow(
-        np.ma.masked_invalid(z), cmap="terrain", alpha=0.45, extent=extent, interpolation="nearest"
+        np.ma.masked_invalid(z),
+        cmap=TINT_CMAP,
+        alpha=TINT_ALPHA,
+        extent=extent,
+        interpolation="nearest",
     )
     tint.set_transform(pixel_to_map + ax.transData)
     nodata = np.ma.masked_where(np.isfinite(z), np.ones_like(z))
     hole = ax.imshow(
-        nodata, cmap="Reds", vmin=0, vmax=3, extent=extent, alpha=0.55, interpolation="nearest"
+        nodata,
+        cmap=ListedColormap([NODATA_COLOUR]),
+        extent=extent,
+        alpha=NODATA_ALPHA,
+        interpolation="nearest",
     )
     hole.set_transform(pixel_to_map + ax.transData)
     bar = fig.colorbar(tint, ax=ax, shrink=0.6, pad=0.01)
@@ -217,7 +180,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
     band = plan.band_flight
     fig, ax, panels = _terrain_figure(plan.terrain, 0 if band is None else len(plan.missions))
     # A colour per target and its region; a band plan has no regions.
-    palette = [f"C{k % 10}" for k in range(len(plan.regions) or len(plan.targets_xy))]
+    palette = target_colours(len(plan.regions) or len(plan.targets_xy))
     for region, colour in zip(plan.regions, palette if plan.regions else [], strict=True):
         if region.polygon.is_empty:
             continue
@@ -245,7 +208,7 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
         )
 
     hx, hy = plan.home_xy
-    to_map = pyproj.Transformer.from_crs(WGS84, plan.crs, always_xy=True)
+    to_map = map_transformer(plan.crs)
     paths = _draw_sorties(ax, plan, to_map)
     if band is not None:
         draw_band_stops(fig, ax, plan)
@@ -254,49 +217,28 @@ def map_figure(plan: Plan, data: dict[str, Any]) -> Figure:
         [hx], [hy], marker="*", s=260, c="white", edgecolors="black", zorder=11, label="home"
     )
 
-    fence_lat, fence_lon = zip(*plan.geofence_latlon, strict=True)
-    fx, fy = to_map.transform(fence_lon, fence_lat)
+    fence = geofence_xy(plan, to_map)
     ax.add_patch(
         PolygonPatch(
-            np.column_stack([fx, fy]),
+            fence,
             closed=True,
             fill=False,
-            edgecolor="#c00000",
+            edgecolor=FENCE_COLOUR,
             linestyle="--",
             linewidth=1.2,
             zorder=4,
             label="geofence",
         )
     )
-    everything = np.vstack(
-        [*paths, plan.targets_xy, np.column_stack([fx, fy])]
-        + [np.asarray(r.polygon.exterior.coords) for r in plan.regions if not r.polygon.is_empty]
-    )
-    lo, hi = everything.min(axis=0), everything.max(axis=0)
-    pad = 0.08 * float(max(hi - lo)) + 5.0
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    _scale_bar_and_north(ax, lo - pad, hi + pad)
+    lo, hi = view_bounds([*paths, plan.targets_xy, fence, *region_rings(plan)])
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    _scale_bar_and_north(ax, lo, hi)
     ax.set_xlabel(f"easting (m, {plan.crs.name})", **_PLAIN)
     ax.set_ylabel("northing (m)")
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.tick_params(labelsize=7)
-    quality = flight_quality(data, short=True)
-    count = len(data["sorties"])
-    sorties = f" in {count} sorties, each from home and back" if count > 1 else ""
-    ax.set_title(
-        f"{data['targets']} targets, {data['tour_stops']} stops, "
-        f"{'flown' if count > 1 else 'tour'} {data['tour_length_m']:.0f} m"
-        f" ({quality}), {data['flight_time_s'] / 60:.1f} min{sorties}\n"
-        + (
-            title_lines(data)
-            if band is not None
-            else f"altitude {data['altitude_amsl_m']:.1f} m AMSL / "
-            f"{data['altitude_above_home_m']:.1f} m above home"
-        )
-        + f", {_camera_words(data)}, solver {data['solver']}",
-        fontsize=10,
-    )
+    ax.set_title(map_title(data), fontsize=10)
     ax.legend(loc="lower right", fontsize=8, framealpha=0.8)
     if band is not None:
         draw_profiles(panels, plan)
@@ -395,18 +337,15 @@ def render_fleet_map(plans: Sequence[Plan | None], title: str) -> bytes:
 def fleet_figure(plans: Sequence[Plan | None], title: str) -> Figure:
     """The fleet map as a matplotlib figure; vehicle k's routes are the lines with gid
     ``vehicle k sortie N``."""
-    widest = max((p for p in plans if p is not None), key=lambda p: p.terrain.elevation_m.size)
+    widest = widest_plan(plans)
     fig, ax, _ = _terrain_figure(widest.terrain)
-    to_map = pyproj.Transformer.from_crs(WGS84, widest.crs, always_xy=True)
+    to_map = map_transformer(widest.crs)
     drawn = []
     for number, plan in enumerate(plans, start=1):
         if plan is None:
             continue
         colour = sortie_colour(number)
-        for region in plan.regions:
-            if region.polygon.is_empty:
-                continue
-            ring = np.asarray(region.polygon.exterior.coords)
+        for ring in region_rings(plan):
             drawn.append(ring)
             ax.add_patch(
                 PolygonPatch(ring, closed=True, facecolor=colour, alpha=0.15, edgecolor=colour)
@@ -417,11 +356,7 @@ def fleet_figure(plans: Sequence[Plan | None], title: str) -> Figure:
             ax.annotate(
                 t.name, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=6, **_PLAIN
             )
-        label = (
-            f"vehicle {number}: {len(plan.targets.targets)} targets, "
-            f"{plan.flown_length_m:.0f} m, {plan.flight_time_s / 60:.1f} min at "
-            f"{plan.camera.altitude_m:.0f} m"
-        )
+        label = vehicle_label(number, plan)
         for k, route in enumerate(sortie_routes(plan, to_map), start=1):
             drawn.append(route)
             ax.plot(route[:, 0], route[:, 1], "-", color="black", linewidth=2.4, zorder=7)
@@ -437,12 +372,10 @@ def fleet_figure(plans: Sequence[Plan | None], title: str) -> Figure:
             )
         hx, hy = plan.home_xy
         ax.scatter([hx], [hy], marker="*", s=220, color=colour, edgecolors="black", zorder=11)
-    everything = np.vstack(drawn)
-    lo, hi = everything.min(axis=0), everything.max(axis=0)
-    pad = 0.08 * float(max(hi - lo)) + 5.0
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    _scale_bar_and_north(ax, lo - pad, hi + pad)
+    lo, hi = view_bounds(drawn)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    _scale_bar_and_north(ax, lo, hi)
     ax.set_xlabel(f"easting (m, {widest.crs.name})", **_PLAIN)
     ax.set_ylabel("northing (m)")
     ax.ticklabel_format(useOffset=False, style="plain")
@@ -453,11 +386,4 @@ def fleet_figure(plans: Sequence[Plan | None], title: str) -> Figure:
     return fig
 
 
-__all__ = [
-    "fleet_figure",
-    "frame_footprints",
-    "map_figure",
-    "render_fleet_map",
-    "render_map",
-    "sortie_routes",
-]
+__all__ = ["fleet_figure", "map_figure", "render_fleet_map", "render_map"]

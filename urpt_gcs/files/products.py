@@ -2,13 +2,15 @@
 
 One sortie: ``mission.plan`` and ``mission.waypoints``; several: ``mission_1.plan``,
 ``mission_1.waypoints``, ``mission_2.plan``, ... Always ``summary.json``, ``plan.kml`` and
-``plan.geojson``, and ``map.png`` unless the caller asks for none. Each ``.plan`` carries what
-its replay must check (:class:`~urpt_gcs.files.formats.qgc_plan.ReplayCheck`); a
+``plan.geojson``, and ``map.png`` with ``map.html`` (the same map as a page to pan, zoom and
+hover, :mod:`urpt_gcs.files.mappage`) unless the caller asks for no map. Each ``.plan``
+carries what its replay must check (:class:`~urpt_gcs.files.formats.qgc_plan.ReplayCheck`); a
 ``.waypoints`` has no room for it, and its replay reads ``summary.json`` beside it.
 
 ``--out`` holds one plan's files: a file of an earlier plan under one of these names
 (:data:`PRODUCT_NAMES`) that this plan does not write is removed with the rest of the earlier
-set. Any other file in the folder is the operator's and is left alone.
+set, as is ``flown.json``, the report of a flight of it. Any other file in the folder is the
+operator's and is left alone.
 """
 
 from __future__ import annotations
@@ -32,8 +34,12 @@ from urpt_gcs.pipeline.result import Plan
 
 SUMMARY_FILE = "summary.json"
 MAP_FILE = "map.png"
+MAP_PAGE_FILE = "map.html"
 PRODUCT_NAMES = re.compile(
-    r"mission(?:_[1-9][0-9]*)?\.(?:plan|waypoints)|summary\.json|map\.png|plan\.(?:kml|geojson)"
+    r"mission(?:_[1-9][0-9]*)?\.(?:plan|waypoints)|summary\.json|map\.(?:png|html)"
+    r"|plan\.(?:kml|geojson)"
+    # What a flight of the earlier plan photographed (``urpt-gcs flown``): not of this plan.
+    r"|flown\.json"
 )
 
 
@@ -109,14 +115,16 @@ def render_products(
         files[f"{stem}.waypoints"] = waypoints_text(mission)
     files["plan.kml"] = plan_kml(plan)
     files["plan.geojson"] = plan_geojson(plan)
-    names = [*files, SUMMARY_FILE] + ([MAP_FILE] if with_map else [])
+    names = [*files, SUMMARY_FILE] + ([MAP_FILE, MAP_PAGE_FILE] if with_map else [])
     data = summary(plan, files=[str(out_dir / n) for n in names])
     files[SUMMARY_FILE] = json.dumps(data, indent=2) + "\n"
     if with_map:
-        # matplotlib loads only when a map is drawn.
+        # matplotlib and Bokeh load only when a map is drawn.
+        from urpt_gcs.files.mappage import render_map_page
         from urpt_gcs.files.mapview import render_map
 
         files[MAP_FILE] = render_map(plan, data)
+        files[MAP_PAGE_FILE] = render_map_page(plan, data)
     return data, files
 
 
@@ -135,7 +143,7 @@ def write_products(
     out
         The folder, or the :class:`Destination` :func:`check_out` returned for it.
     with_map
-        Draw ``map.png``.
+        Draw ``map.png`` and ``map.html``.
     also
         Further files committed in the same step (``--export-gtsp``): all are written or
         none, and ``out`` keeps its earlier set on any failure.
@@ -158,6 +166,7 @@ def write_products(
 
 __all__ = [
     "MAP_FILE",
+    "MAP_PAGE_FILE",
     "PRODUCT_NAMES",
     "SUMMARY_FILE",
     "check_extra",

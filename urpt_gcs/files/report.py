@@ -294,24 +294,40 @@ def _altitude_curve(plan: Plan) -> dict[str, Any]:
     }
 
 
+def photo_gsd_cm(plan: Plan) -> list[dict[int, float]] | None:
+    """The ground resolution of each photo at each target it is counted for, in cm/px: per
+    stop of the tour in flight order, target index -> GSD; None for a cone camera, which
+    gives none."""
+    frame = plan.camera.frame
+    tour = plan.tour
+    if frame is None:
+        return None
+    assert tour.points_xy is not None
+    eyes = eye_heights_m(plan)
+    out = []
+    for k, xy in enumerate(tour.points_xy):
+        seen = np.flatnonzero(tour.sees[k])
+        horizontal = np.hypot(*(plan.targets_xy[seen] - xy).T)
+        slant = np.hypot(horizontal, eyes[k] - plan.ground_m[seen])
+        out.append(dict(zip(seen.tolist(), frame.gsd_cm(slant).tolist(), strict=True)))
+    return out
+
+
 def _frame_camera(plan: Plan) -> dict[str, Any]:
     """A frame camera's figures: the frame, the headings offered, the ground resolution
     required and reached per target (the finest photo of it), and each photo's heading as
     the mission gives it. Nothing for the cone."""
     camera = plan.camera
     frame = camera.frame
-    if frame is None:
+    gsd = photo_gsd_cm(plan)
+    if frame is None or gsd is None:
         return {}
-    tour = plan.tour
-    assert tour.points_xy is not None
     names = [t.name for t in plan.targets.targets]
-    reached = {}
-    eyes = eye_heights_m(plan)
-    for t, name in enumerate(names):
-        stops = np.flatnonzero(tour.sees[:, t])
-        horizontal = np.hypot(*(tour.points_xy[stops] - plan.targets_xy[t]).T)
-        slant = np.hypot(horizontal, eyes[stops] - plan.ground_m[t])
-        reached[name] = round(float(frame.gsd_cm(slant.min())), 3)
+    finest = [math.inf] * len(names)
+    for photo in gsd:
+        for t, cm in photo.items():
+            finest[t] = min(finest[t], cm)
+    reached = {name: round(cm, 3) for name, cm in zip(names, finest, strict=True)}
     worst = max(reached, key=lambda n: reached[n])
     headings = [h for m in plan.missions for h in (photo_headings(m) or [])]
     return {
@@ -549,6 +565,7 @@ __all__ = [
     "FlownStop",
     "flight_quality",
     "flown_stops",
+    "photo_gsd_cm",
     "sortie_colour",
     "summary",
     "summary_text",

@@ -15,8 +15,9 @@ __all__ = ["write_outputs"]
 
 def write_outputs(result: Plan | FleetPlan, out: Path, with_map: bool = True) -> dict[str, Any]:
     """Write a plan's files (``mission.plan``, ``mission.waypoints``, ``plan.kml``,
-    ``plan.geojson``, ``summary.json``, ``map.png``), or a fleet's folder (one sub-folder per
-    vehicle and the fleet's summary), into ``out`` as one set, as ``urpt-gcs plan`` does.
+    ``plan.geojson``, ``summary.json``, ``map.png``, ``map.html``), or a fleet's folder (one
+    sub-folder per vehicle and the fleet's summary), into ``out`` as one set, as ``urpt-gcs
+    plan`` does.
 
     Parameters
     ----------
@@ -26,7 +27,7 @@ def write_outputs(result: Plan | FleetPlan, out: Path, with_map: bool = True) ->
         The folder; it is created if missing, and an earlier plan's files in it are replaced
         as a set (any other file is left alone).
     with_map
-        Draw ``map.png``.
+        Draw ``map.png`` and ``map.html``.
 
     Returns
     -------

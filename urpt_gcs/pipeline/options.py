@@ -231,7 +231,7 @@ PLAN_OPTIONS: tuple[Option, ...] = (
         "Battery endurance, minutes; a longer tour is split into sorties.",
         unit="min",
     ),
-    Option("no-map", "", "flag", False, "Do not draw map.png."),
+    Option("no-map", "", "flag", False, "Do not draw map.png and map.html."),
     Option(
         "home",
         "home",

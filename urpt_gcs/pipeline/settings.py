@@ -249,9 +249,18 @@ class FleetSettings:
         return self.layer_spacing_m if self.separation == "altitude" else self.min_separation_m
 
 
+# Settings of how the work runs rather than of the plan: a later plan runs on its own
+# computer, with its own threads.
+_NOT_RECORDED = ("workers",)
+
+
 def settings_record(settings: PlanSettings) -> dict[str, Any]:
-    """``settings`` as JSON-ready values, field by field (``summary.json``'s ``settings``)."""
-    return dataclasses.asdict(settings)
+    """``settings`` as JSON-ready values, field by field (``summary.json``'s ``settings``),
+    but for how the work ran (the threads)."""
+    record = dataclasses.asdict(settings)
+    for name in _NOT_RECORDED:
+        del record[name]
+    return record
 
 
 def settings_from_record(record: Mapping[str, Any], source: str) -> PlanSettings:
