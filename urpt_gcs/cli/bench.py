@@ -143,6 +143,21 @@ def bench_client(scheduler: str | None, workers: int | None) -> Iterator[Client 
     show_default=True,
     help="Order searches per instance run side by side (one core each).",
 )
+@click.option(
+    "--peer",
+    default=None,
+    metavar="CMD",
+    help="Run this CETSP solver beside ours, one CPU each, and compare: a command with "
+    "{instance} (the file) and optionally {name}, {time_s}, {seed}, that prints "
+    "'TOUR x1 y1 x2 y2 ...' on stdout (see benchmarks/README.md).",
+)
+@click.option(
+    "--peer-grace",
+    type=NON_NEGATIVE,
+    default=None,
+    help="Seconds past the time limit before the peer is killed [default: 2 + 10 % of the "
+    "time limit].",
+)
 @cluster_options
 def bench_cetsp_command(
     directory: Path,
@@ -153,15 +168,44 @@ def bench_cetsp_command(
     out: Path | None,
     seed: int,
     threads: int,
+    peer: str | None,
+    peer_grace: float | None,
     scheduler: str | None,
     workers: int | None,
 ) -> None:
     """Solve and bound the CETSP instances in DIRECTORY (laid out like bench/cetsp)."""
     from urpt_gcs.bench.cetsp import format_table, run_cetsp
 
+    names = [part.strip() for part in (only or "").split(",") if part.strip()]
+    if peer is None:
+        if peer_grace is not None:
+            raise click.UsageError("--peer-grace is the peer's: give it with --peer")
+    else:
+        if threads != 1 or scheduler is not None or workers is not None:
+            raise click.UsageError(
+                "--peer runs ours on one core beside the peer: not with --threads, --workers "
+                "or --scheduler"
+            )
+        from urpt_gcs.bench.cetsp_peer import format_peer_table, run_cetsp_peer
+
+        results_out(out)
+        compared = run_cetsp_peer(
+            directory,
+            peer,
+            time_limit_s=time_limit,
+            only=names or None,
+            out_dir=out,
+            progress=terminal_progress(),
+            seed=seed,
+            min_discs=min_discs,
+            max_discs=max_discs,
+            grace_s=peer_grace,
+        )
+        click.echo(format_peer_table(compared))
+        return
+
     results_out(out)
 
-    names = [part.strip() for part in (only or "").split(",") if part.strip()]
     with bench_client(scheduler, workers) as client:
         rows = run_cetsp(
             directory,
