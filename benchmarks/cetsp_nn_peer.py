@@ -10,9 +10,9 @@ It is a template for wrapping a real solver: read the instance, solve, print
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
-import sys
 from pathlib import Path
 
 
@@ -30,4 +30,6 @@ def main(path: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("instance", help="a CETSP instance file (as in ../shared/bench/cetsp)")
+    main(parser.parse_args().instance)
