@@ -338,7 +338,7 @@ def read_flight_log(path: Path) -> FlightLog:
         got.damaged += 1
     except OSError as exc:
         raise _refuse(path, f"cannot be read ({exc.strerror or exc})", "check the file") from None
-    vehicles = {s: a for s, a in got.autopilots.items()}
+    vehicles = got.autopilots
     if count == 0 or (not got.track and not vehicles):
         raise _refuse(path, f"holds no MAVLink {'telemetry' if kind == 'tlog' else 'DataFlash'}")
     if len(vehicles) > 1:
