@@ -12,6 +12,7 @@ when --out holds an earlier plan (left byte for byte).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import shutil
 from collections.abc import Callable, Mapping
@@ -25,6 +26,7 @@ from conftest import DEMO
 from lxml import etree  # pymavlink's dependency: a parser other than ours
 from support.targets import write_kmz
 
+import urpt_gcs
 from urpt_gcs.cli import main
 from urpt_gcs.files import mapview
 from urpt_gcs.site.targets import read_targets
@@ -270,3 +272,27 @@ def test_names_with_markup_round_trip_through_plan_kml_and_geojson(tmp_path: Pat
     assert [f["properties"]["name"] for f in features if f["properties"]["kind"] == "target"] == (
         expected
     )
+
+
+@pytest.mark.parametrize(
+    ("rename", "expected"),
+    [
+        ({0: "a\x01b"}, "has target 1 'a\\x01b' whose name holds the control character U+0001"),
+        ({2: "\u202egnp.exe"}, "has target 3 '\\u202egnp.exe' whose name holds the invisible"),
+        ({1: DEMO_SET.targets[0].name}, f"has two targets named '{DEMO_SET.targets[0].name}'"),
+    ],
+)
+def test_a_target_set_built_in_python_is_held_to_the_files_rules(
+    rename: Mapping[int, str], expected: str
+) -> None:
+    """The public API takes targets already read; their names are checked as a file's are,
+    before any work, so that plan.kml stays XML and every name says which target it is."""
+    targets = tuple(
+        dataclasses.replace(t, name=rename.get(k, t.name)) for k, t in enumerate(DEMO_SET.targets)
+    )
+    site = dataclasses.replace(DEMO_SET, targets=targets, source="my targets")
+
+    with pytest.raises(urpt_gcs.TargetsError) as refused:
+        urpt_gcs.plan(DEMO / "site.tif", site)
+
+    assert str(refused.value).startswith(f"targets file 'my targets' {expected}")

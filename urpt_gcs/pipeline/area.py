@@ -30,7 +30,7 @@ from urpt_gcs.pipeline.settings import PlanSettings
 from urpt_gcs.problem.instance import instance_bytes
 from urpt_gcs.site.dem import WGS84, DemInfo, open_dem, planning_crs
 from urpt_gcs.site.reading import BlockCache, area_max, read_mosaic, sample_points
-from urpt_gcs.site.targets import TargetSet, read_targets
+from urpt_gcs.site.targets import TargetSet, check_names, read_targets
 from urpt_gcs.site.terrain import Terrain
 from urpt_gcs.visibility.regions import Camera
 
@@ -124,7 +124,10 @@ def read_site(dem_path: Path, targets_path: Path | TargetSet, settings: PlanSett
         A target file or DEM that cannot be read, a point off the DEM or with lat and lon
         swapped, or more targets than the memory budget holds.
     """
-    targets = targets_path if isinstance(targets_path, TargetSet) else read_targets(targets_path)
+    if isinstance(targets_path, TargetSet):
+        targets = check_names(targets_path)
+    else:
+        targets = read_targets(targets_path)
     # Every target offers its nadir and a viewpoint per azimuth, each seeing at least its own
     # target, and the tour records which targets each stop sees (a stop per target at most):
     # refuse, before any work, a target count whose instance and tour could not fit.

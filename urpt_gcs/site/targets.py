@@ -34,7 +34,15 @@ from defusedxml import DefusedXmlException
 from urpt_gcs.errors import TargetsError
 from urpt_gcs.site.inputs import TARGETS_MAX_BYTES, read_capped
 
-__all__ = ["HOME_NAMES", "SAME_PLACE_DEG", "SWAP_FIX", "Target", "TargetSet", "read_targets"]
+__all__ = [
+    "HOME_NAMES",
+    "SAME_PLACE_DEG",
+    "SWAP_FIX",
+    "Target",
+    "TargetSet",
+    "check_names",
+    "read_targets",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -551,6 +559,29 @@ def _refuse_a_name_given_twice(source: str, points: list[_Point]) -> None:
         if earlier is not p:
             problem = f"has two targets named {_q(p.name)} ({earlier.where} and {p.where})"
             raise _error(source, problem, "rename one of them")
+
+
+def check_names(site: TargetSet) -> TargetSet:
+    """``site`` as given, once its names are fit for every output: what :func:`read_targets`
+    holds a file's names to, for a set built in Python rather than read from a file.
+
+    Raises
+    ------
+    TargetsError
+        If a name (the home's included) holds a control character, a noncharacter, a lone
+        surrogate or an invisible text-direction mark, or two targets have one name.
+    """
+    seen: set[str] = set()
+    for t in site.targets:
+        if t.name in seen:
+            raise _error(site.source, f"has two targets named {_q(t.name)}", "rename one of them")
+        seen.add(t.name)
+    for k, t in enumerate((*site.targets, *(() if site.home is None else (site.home,))), 1):
+        if (unfit := _name_problem(t.name)) is not None:
+            where = "home" if k > len(site.targets) else f"target {k}"
+            problem = f"has {where} {_q(t.name)} whose name holds {unfit}"
+            raise _error(site.source, problem, "remove it from the name")
+    return site
 
 
 def _first_duplicate(targets: list[Target]) -> tuple[int, int] | None:
