@@ -344,6 +344,11 @@ PLAN_CASES: dict[str, tuple[list[str], list[str]]] = {
         ["--vehicles", "30000000"],
         ["--vehicles", "30000000 vehicles", "over the 16"],
     ),
+    # This one once ended in "out of memory: plan fewer targets", naming the wrong input.
+    "fleet_vehicles_hundred_million": (
+        ["--vehicles", "100000000"],
+        ["--vehicles", "100000000 vehicles", "over the 16"],
+    ),
     "fleet_fifo": (["--fleet", "%fleet_fifo.toml"], ["fleet_fifo.toml", "FIFO", "--fleet"]),
     "fleet_link_to_dev_zero": (
         ["--fleet", "%fleet_link_to_dev_zero.toml"],
