@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 
@@ -33,7 +34,8 @@ from urpt_gcs.visibility.outer import finer_stars, outer_regions
 from urpt_gcs.visibility.outer import warm_up as warm_walks
 
 # Share of the bound's time the outer stars past the first ones (those far apart, walked
-# whatever the clock) may take to walk, beside the bound's own time.
+# whatever the clock) may take to walk; the bound itself has the rest, and never less than
+# this share, so the stage keeps to its time unless the first stars alone overrun it.
 _WALK_SHARE = 0.5
 
 # How much shorter a tour read off the bound must be to replace the refined one.
@@ -160,7 +162,8 @@ def certify_flight(
         A closed flight from home that photographs every target, in one piece: the bound of
         one flight searches below it (sorties, flown longer, would let it search wider).
     time_limit_s
-        Seconds the bound may take.
+        Seconds the stage may take, the outer stars' walk included (more only when the
+        stars walked whatever the clock take over half of it).
     settings
         The plan's settings: workers, the position tolerance (how far from its waypoint a
         stop still photographs), the endurance and the flight model's speeds.
@@ -173,6 +176,7 @@ def certify_flight(
         The lower bound and how it was proved.
     """
     workers, hold_m = settings.workers, settings.position_tolerance_m
+    started = time.perf_counter()
     regions, ratio = outer_regions(
         area.terrain,
         site.targets_xy,
@@ -185,7 +189,8 @@ def certify_flight(
     )
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
-    single = certify(regions, min(flown_m, tour_m), time_limit_s, also, ratio, tighten)
+    left_s = max(time_limit_s - (time.perf_counter() - started), _WALK_SHARE * time_limit_s)
+    single = certify(regions, min(flown_m, tour_m), left_s, also, ratio, tighten)
     if budget is None:
         endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
         budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
