@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
+from urpt_gcs.arrays import BoolArray, FloatArray, IntArray, unique_ints
 from urpt_gcs.memory import require_memory
 
 __all__ = [
@@ -87,7 +87,7 @@ class Covers:
             raise ValueError("Covers.from_pairs needs as many viewpoint as target indices")
         if vp.size and (vp.min() < 0 or vp.max() >= n_viewpoints):
             raise ValueError(f"Covers.from_pairs: viewpoints must lie in 0..{n_viewpoints - 1}")
-        key = np.unique(vp * max(n_targets, 1) + tg)
+        key = unique_ints(vp * max(n_targets, 1) + tg)
         vp, tg = key // max(n_targets, 1), key % max(n_targets, 1)
         ptr = np.zeros(n_viewpoints + 1, dtype=np.int64)
         np.cumsum(np.bincount(vp, minlength=n_viewpoints), out=ptr[1:])

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from urpt_gcs.arrays import FloatArray, IntArray
+from urpt_gcs.arrays import FloatArray, IntArray, unique_ints
 from urpt_gcs.errors import PlanError, SettingsError
 from urpt_gcs.problem.instance import Covers, Geometry, Instance
 from urpt_gcs.solvers.base import SolveSettings
@@ -127,7 +127,7 @@ def restrict(instance: Instance, targets: Sequence[int]) -> tuple[Instance, IntA
     new_of[keep_t] = np.arange(keep_t.size)
     vp, tg = instance.covers.pairs()
     mask = new_of[tg] >= 0
-    kept = np.unique(vp[mask])
+    kept = unique_ints(vp[mask])
     vp_new = np.searchsorted(kept, vp[mask])
     covers = Covers.from_pairs(vp_new, new_of[tg[mask]], kept.size, keep_t.size)
     g = instance.geometry
