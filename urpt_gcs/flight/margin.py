@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy import sparse
 
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.site.terrain import Terrain
@@ -70,7 +71,7 @@ class Site:
 def sees_around(
     site: Site,
     cand: FloatArray,
-    sees: BoolArray,
+    sees: BoolArray | sparse.csr_array,
     heading: FloatArray | None,
     also: Callable[[IntArray], BoolArray] | None = None,
 ) -> BoolArray:
@@ -89,7 +90,8 @@ def sees_around(
     """
     cam = site.camera
     radius = max(site.tolerance_m, 0.0)
-    stop, target = np.nonzero(sees)
+    # Rows may be sparse: at thousands of targets a dense row per candidate is mostly zeros.
+    stop, target = sees.nonzero()
     tx, tg = site.targets_xy[target], site.ground_m[target]
     at = None if heading is None else heading[stop]
     failed = np.zeros(len(cand), dtype=bool)

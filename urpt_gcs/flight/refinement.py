@@ -31,6 +31,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
@@ -107,7 +108,7 @@ def _toward_line(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
 def _feasible(
     site: Site,
     cand: FloatArray,
-    sees: BoolArray,
+    sees: BoolArray | sparse.csr_array,
     heading: FloatArray | None,
     a: FloatArray,
     b: FloatArray,
@@ -130,7 +131,9 @@ def _feasible(
     return ok
 
 
-def flies_from(site: Site, cand: FloatArray, sees: BoolArray, depot: FloatArray) -> BoolArray:
+def flies_from(
+    site: Site, cand: FloatArray, sees: BoolArray | sparse.csr_array, depot: FloatArray
+) -> BoolArray:
     """Whether a stop could be flown from each candidate (a cone camera): it sees every
     target of its row of ``sees`` from anywhere within the tolerance and as written,
     and its leg straight home clears the terrain (a sortie may end there)."""
@@ -360,6 +363,9 @@ def _pattern_search(
     before = _closed_length(pts, depot)
     theta = np.arange(_DIRECTIONS) * (2.0 * math.pi / _DIRECTIONS)
     ring = np.column_stack([np.cos(theta), np.sin(theta)])
+    # The rows of the candidates' stops are taken many times over: sparse, they cost what
+    # the stops see, not the whole width of the targets.
+    rows = sparse.csr_array(sees)
     moves = sweeps = 0
     while sweeps < _MAX_SWEEPS and time.perf_counter() - started < time_limit_s:
         sweeps += 1
@@ -389,7 +395,7 @@ def _pattern_search(
                     ok[si, ti] = _feasible(
                         site,
                         cand[si, ti],
-                        sees[k[si]],
+                        rows[k[si]],
                         None if heading is None else heading[k[si]],
                         a[si],
                         b[si],
@@ -430,6 +436,7 @@ def _two_opt(
     that shortens it and both new legs clear the terrain; whether anything changed."""
     n = len(pts)
     changed = False
+    moved = np.arange(n)  # the stop now at each place, numbered as before
     h = site.camera.altitude_m
     first = 0 if depot is not None else 1
     for _ in range(n):
@@ -464,12 +471,15 @@ def _two_opt(
             ):
                 continue
             k = int(j[best])
-            for arr in (pts, sees, perm, heading):
+            for arr in (pts, moved, perm, heading):
                 if arr is not None:
                     arr[i : k + 1] = arr[i : k + 1][::-1].copy()
             improved = changed = True
         if not improved:
             break
+    if changed:
+        # The rows of what each stop sees follow once, not with every reversal.
+        sees[:] = sees[moved]
     return changed
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyproj
+from scipy import sparse
 
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.errors import PlanError
@@ -215,7 +216,9 @@ def _alternatives(
     # is drawn towards its stop (which passes) by halving, and the passing point nearest it
     # kept.
     stop_xy = tour.points_xy[own]
-    ok = flies_from(check, xy, tour.sees[own], home)
+    # Each candidate takes its stop's row, many times over: sparse rows cost what they hold.
+    rows = sparse.csr_array(tour.sees)
+    ok = flies_from(check, xy, rows[own], home)
     lo = np.zeros(len(xy))  # share of the way to the stop known to fail (0: the candidate)
     hi = np.where(ok, 0.0, 1.0)  # share known to pass (1: the stop itself)
     for _ in range(_TOWARDS_STOP_STEPS):
@@ -224,7 +227,7 @@ def _alternatives(
             break
         mid = 0.5 * (lo[todo] + hi[todo])
         at = xy[todo] + mid[:, None] * (stop_xy[todo] - xy[todo])
-        passed = flies_from(check, at, tour.sees[own[todo]], home)
+        passed = flies_from(check, at, rows[own[todo]], home)
         hi[todo] = np.where(passed, mid, hi[todo])
         lo[todo] = np.where(passed, lo[todo], mid)
     keep = hi < 1.0
