@@ -571,16 +571,16 @@ def check_names(site: TargetSet) -> TargetSet:
         If a name (the home's included) holds a control character, a noncharacter, a lone
         surrogate or an invisible text-direction mark, or two targets have one name.
     """
+    labelled = [(f"target {k}", t) for k, t in enumerate(site.targets, start=1)]
+    labelled += [] if site.home is None else [("home", site.home)]
     seen: set[str] = set()
-    for t in site.targets:
-        if t.name in seen:
-            raise _error(site.source, f"has two targets named {_q(t.name)}", "rename one of them")
-        seen.add(t.name)
-    for k, t in enumerate((*site.targets, *(() if site.home is None else (site.home,))), 1):
+    for where, t in labelled:
         if (unfit := _name_problem(t.name)) is not None:
-            where = "home" if k > len(site.targets) else f"target {k}"
             problem = f"has {where} {_q(t.name)} whose name holds {unfit}"
             raise _error(site.source, problem, "remove it from the name")
+        if where != "home" and t.name in seen:
+            raise _error(site.source, f"has two targets named {_q(t.name)}", "rename one of them")
+        seen.add(t.name)
     return site
 
 
