@@ -465,7 +465,7 @@ def test_a_second_sharing_that_is_refused_leaves_the_first(
     calls: list[object] = []
 
     def shared(*args: Any, **kwargs: Any) -> Any:
-        calls.append(args[5])
+        calls.append((args[5], kwargs.get("naive", False)))
         if len(calls) > 1:
             raise SettingsError("vehicle 2 has nothing left to photograph")
         tours, plans, separation = real(*args, **kwargs)
@@ -477,11 +477,62 @@ def test_a_second_sharing_that_is_refused_leaves_the_first(
     settings = PlanSettings(solve=SolveSettings(time_limit_s=2.0))
     fleet = FleetSettings((VehicleSpec(), VehicleSpec()))
     result = fleet_module.plan_fleet(DEMO / "site.tif", DEMO / "targets.kml", settings, fleet)
-    assert calls == [None, (0.0, 30.0)]
+    # The first sharing, the second (refused), then the naive split to compare (refused too).
+    assert calls == [(None, False), ((0.0, 30.0), False), ((0.0, 30.0), True)]
+    assert result.naive_flown_s == math.inf
     assert result.separation.start_delays_s == (0.0, 30.0)
     first, second = (p.flight_time_s for p in result.plans)
     assert result.makespan_s == pytest.approx(max(first, 30.0 + second))
     assert result.makespan_s >= result.bound.bound_s
+
+
+def test_a_searched_sharing_that_flies_later_gives_way_to_the_naive_split(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """The search compares estimates; margins and refinement change the flights after it.
+    Whatever it hands on, the plan never lands after the naive split finished and flown the
+    same way: here the search is made to give one vehicle every stop, and the naive split's
+    two flights are kept."""
+    from urpt_gcs.solvers.fleet import FleetTours
+
+    real = fleet_module.solve_fleet
+    handed: list[FleetTours] = []
+
+    def one_does_all(vehicles: Any, single_order: Any, reference: Any, *rest: Any) -> FleetTours:
+        tours = real(vehicles, single_order, reference, *rest)
+        same = vehicles[0].instance.points_xy
+        assert all(np.array_equal(v.instance.points_xy, same) for v in vehicles)
+        everything = tuple(dict.fromkeys(v for order in tours.orders for v in order))
+        times = (vehicles[0].time_s(same[list(everything)]), *(0.0 for _ in vehicles[1:]))
+        worse = dataclasses.replace(
+            tours,
+            orders=(everything, *(() for _ in vehicles[1:])),
+            targets=(tuple(range(reference.n_targets)), *(() for _ in vehicles[1:])),
+            times_s=times,
+        )
+        handed.append(worse)
+        return worse
+
+    monkeypatch.setattr(fleet_module, "solve_fleet", one_does_all)
+    fleet_file = tmp_path / "fleet.toml"
+    fleet_file.write_text(
+        "[[vehicle]]\nhome_lat = 47.68876\nhome_lon = 9.42309\n\n"
+        "[[vehicle]]\nhome_lat = 47.68990\nhome_lon = 9.42150\n"
+    )
+    from urpt_gcs.pipeline.settings import read_fleet
+
+    fleet = FleetSettings(read_fleet(fleet_file), separation="time")
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=2.0))
+    result = fleet_module.plan_fleet(DEMO / "site.tif", DEMO / "targets.kml", settings, fleet)
+    assert handed, "the search was not asked"
+    assert math.isfinite(result.naive_flown_s)
+    assert result.makespan_s == pytest.approx(result.naive_flown_s)
+    # Both vehicles fly, and the fleet lands well before one vehicle flying every stop.
+    flying = [p for p in result.flying if p is not None]
+    assert len(flying) == 2
+    assert result.makespan_s < 0.8 * handed[0].times_s[0]
+    seen = {t.name for p in flying for t in p.targets.targets}
+    assert seen == {t.name for t in read_targets(DEMO / "targets.kml").targets}
 
 
 def test_a_fleet_file_is_read_from_a_path_given_as_text(tmp_path: Path) -> None:

@@ -59,6 +59,7 @@ from urpt_gcs.solvers.fleet import (
     SINGLE_SHARE,
     FleetTours,
     Vehicle,
+    naive_tours,
     reachable,
     refuse_unreachable,
     restrict,
@@ -110,6 +111,10 @@ class FleetPlan:
     single_length_m: float
     single_flight_time_s: float
     timings_s: dict[str, float]
+    # The naive split (the single tour cut into contiguous pieces, nothing searched) finished
+    # and separated as the plans are: when its last vehicle lands (inf: no cut of the tour
+    # fits, or no delay keeps its vehicles apart). The plans land no later.
+    naive_flown_s: float = math.inf
 
     @property
     def flying(self) -> tuple[Plan | None, ...]:
@@ -330,6 +335,21 @@ def plan_fleet(
             _finish_s(plans, separation)
         ):
             tours, plans, separation = again
+    # The search compares the flight model's estimates, and margins and refinement then
+    # change every flight a little: the naive split is finished the same way and kept if
+    # it lands sooner, so the plan never lands after the naive split as flown.
+    stages.say("finishing the naive split, to keep the plan no later than it")
+    delays = separation.start_delays_s
+    try:
+        naive = _shared(
+            problem, fleet, single.order, solvers, search, delays if max(delays) > 0.0 else None,
+            stages, naive=True,
+        )  # fmt: skip
+        naive_flown = max(_finish_s(naive[1], naive[2]))
+    except SettingsError:
+        naive, naive_flown = None, math.inf
+    if naive is not None and naive_flown < max(_finish_s(plans, separation)):
+        tours, plans, separation = naive
     bound = _makespan_bound(problem, single.length, settings, stages)
     result = FleetPlan(
         settings=settings,
@@ -343,6 +363,7 @@ def plan_fleet(
             reference.points_xy[list(single.order)]  # type: ignore[index]
         ),
         timings_s=stages.timings_s,
+        naive_flown_s=naive_flown,
     )
     if result.makespan_s < bound.bound_s * (1.0 - 1e-9):
         raise PlanError(
@@ -360,13 +381,18 @@ def _shared(
     search: SolveSettings,
     offsets_s: tuple[float, ...] | None,
     stages: Stages,
+    naive: bool = False,
 ) -> tuple[FleetTours, tuple[Plan | IdleVehicle, ...], Separation]:
     """The targets shared out (each vehicle's start delay counted), every vehicle's plan
     (or why it is left idle) and the start delays that keep them apart. ``solvers``: the
-    setting the search re-solves with, and the solver the single tour came from."""
-    tours = solve_fleet(
-        problem.vehicles, single_order, problem.reference, solvers[0], search, offsets_s
-    )
+    setting the search re-solves with, and the solver the single tour came from; ``naive``:
+    the naive split as it is cut, not searched."""
+    if naive:
+        tours = naive_tours(problem.vehicles, single_order, problem.reference, offsets_s)
+    else:
+        tours = solve_fleet(
+            problem.vehicles, single_order, problem.reference, solvers[0], search, offsets_s
+        )
     stages.lap("fleet")
     flown = [
         _vehicle_plan(k, layer, tours, solvers[1], stages) if tours.targets[k] else None

@@ -53,6 +53,7 @@ __all__ = [
     "FleetTours",
     "Vehicle",
     "naive_split",
+    "naive_tours",
     "reachable",
     "refuse_unreachable",
     "restrict",
@@ -396,6 +397,45 @@ def solve_fleet(
         start_times_s=start_times,
         moves=moves,
         resolves=resolves,
+        search_s=time.perf_counter() - started,
+        offsets_s=tuple(offsets),
+    )
+
+
+def naive_tours(
+    vehicles: Sequence[Vehicle],
+    single_order: Sequence[int],
+    reference: Instance,
+    offsets_s: Sequence[float] | None = None,
+) -> FleetTours:
+    """The naive split itself as the fleet's tours: the single-vehicle tour cut into K
+    contiguous pieces of earliest last landing (:func:`naive_split`, the start delays
+    counted), each piece carried onto its vehicle's own viewpoints and flown in the cut's
+    order, nothing searched.
+
+    Raises
+    ------
+    urpt_gcs.errors.SettingsError
+        No cut of this tour fits every vehicle's endurance.
+    """
+    offsets = [0.0] * len(vehicles) if offsets_s is None else [float(o) for o in offsets_s]
+    started = time.perf_counter()
+    _, times, cut = naive_split(vehicles, single_order, reference, offsets)
+    routes = [
+        _Route(v, _carried(v, c, reference, _viewpoints_by_target(v.instance)), offsets[k])
+        for k, (v, c) in enumerate(zip(vehicles, cut, strict=True))
+    ]
+    owners = _owners(routes)
+    return FleetTours(
+        orders=tuple(tuple(r.order) for r in routes),
+        targets=tuple(
+            tuple(int(t) for t in np.flatnonzero(owners == k)) for k in range(len(routes))
+        ),
+        times_s=tuple(r.time_s for r in routes),
+        naive_times_s=tuple(times),
+        start_times_s=tuple(r.time_s for r in routes),
+        moves=0,
+        resolves=0,
         search_s=time.perf_counter() - started,
         offsets_s=tuple(offsets),
     )
