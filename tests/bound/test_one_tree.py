@@ -51,6 +51,43 @@ def test_never_above_the_optimum_over_points(seed: int) -> None:
     assert got.value >= 0.7 * best
 
 
+def _optimal_tour(xy: np.ndarray, depot: tuple[float, float]) -> float:
+    """The shortest closed tour from the depot through every point, by dynamic programming
+    over (points visited, last point)."""
+    pts = np.vstack([depot, xy])
+    n = len(pts)
+    d = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+    full = 1 << (n - 1)
+    best = np.full((full, n), np.inf)
+    for j in range(1, n):
+        best[1 << (j - 1), j] = d[0, j]
+    for mask in range(1, full):
+        row = best[mask]
+        if not np.isfinite(row).any():
+            continue
+        reach = (row[:, None] + d).min(axis=0)
+        for k in range(1, n):
+            bit = 1 << (k - 1)
+            if not mask & bit:
+                best[mask | bit, k] = min(best[mask | bit, k], reach[k])
+    return float((best[full - 1] + d[:, 0]).min())
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_on_points_the_ascent_climbs_to_held_karp_near_the_optimum(seed: int) -> None:
+    """On points the relaxation is Held-Karp's, within 2 % of the optimal tour on these
+    twelve random points: the ascent must climb there from the spanning tree it starts at
+    (up to 19 % below on these seeds), not stall near it."""
+    rng = np.random.default_rng(40 + seed)
+    n = 12
+    xy = rng.uniform(0, 100, (n, 2))
+    regions = RegionSet(discs=np.column_stack([xy, np.zeros(n)]), depot_xy=(50.0, 50.0))
+    best = _optimal_tour(xy, (50.0, 50.0))
+    got = lower_bound(regions, 2.0 * best, 2.0, method="one-tree")
+    assert got.value <= best * (1.0 + 1e-9)
+    assert got.value >= 0.975 * best
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_never_above_the_exact_relaxation_over_discs(seed: int) -> None:
     rng = np.random.default_rng(10 + seed)
@@ -79,7 +116,7 @@ def test_never_above_a_known_tour_on_hundreds_of_regions_even_stopped_early() ->
     assert stopped.rounds == 1
     # Over hundreds of regions the 1-tree bound beats the order search over 150 of them.
     auto = lower_bound(regions, tour, 2.0)
-    assert auto.value >= full.value * 0.99 and auto.value <= tour
+    assert stopped.value <= auto.value <= tour
     assert "of 300" in auto.method or auto.method == "one-tree over all 300"
 
 

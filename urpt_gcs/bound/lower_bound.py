@@ -3,9 +3,11 @@
 The bound :func:`lower_bound` reports by default is the branch and bound over visiting orders
 of :mod:`urpt_gcs.bound.order_bound` (fixed-order relaxations over convex supersets of the
 regions, each node certified by weak duality), over a subset far apart where the regions are
-many, or the tube bound of :mod:`urpt_gcs.bound.tube` over them all where it is larger (where
-regions crowd). The older, weaker bounds (``method="pieces"``, ``"exact"`` or
-``"lagrangian"``) relax the regions into pieces (:mod:`urpt_gcs.bound.pieces`).
+many; or the Lagrangian 1-tree of :mod:`urpt_gcs.bound.one_tree` over every region where the
+order search stops short and the 1-tree is larger (small regions far apart); or the tube
+bound of :mod:`urpt_gcs.bound.tube` over them all where it is larger (where regions crowd).
+The older, weaker bounds (``method="pieces"``, ``"exact"`` or ``"lagrangian"``) relax the
+regions into pieces (:mod:`urpt_gcs.bound.pieces`).
 """
 
 from __future__ import annotations
@@ -103,8 +105,9 @@ def lower_bound(
         Stop once ``(upper - bound) / bound`` is at most this.
     method
         ``order``: branch and bound over visiting orders (:func:`order_bound`); ``auto``:
-        that, and beyond :data:`ORDER_MAX_REGIONS` regions the larger of the order search
-        over that many far apart and the 1-tree bound over all of them
+        that (and where it stops short unfinished, the 1-tree bound over every region in the
+        time left, the larger kept), and beyond :data:`ORDER_MAX_REGIONS` regions the larger
+        of the order search over that many far apart and the 1-tree bound over all of them
         (:func:`~urpt_gcs.bound.one_tree.one_tree_bound`, alone: ``one-tree``); and with
         either, the tube bound over every region (:func:`~urpt_gcs.bound.tube.tube_bound`),
         the largest of them kept; ``exact`` or
@@ -124,7 +127,7 @@ def lower_bound(
         tube, _ = tube_bound(np.column_stack([cx, cy]), cr, regions.depot_xy)
         left = max(time_limit_s - (time.perf_counter() - started), 0.0)
         if kept <= ORDER_MAX_REGIONS:
-            found = _order(regions, upper, left, gap_target, exact_shapes)
+            found = _order_then_one_tree(regions, upper, left, gap_target, exact_shapes)
         else:
             found = _all_regions(regions, upper, left, gap_target, exact_shapes, method)
         if tube > found.value:
@@ -251,13 +254,10 @@ def _all_regions(
     """The 1-tree bound over every region and, for ``auto``, the order search over
     :data:`ORDER_MAX_REGIONS` of them far apart: the larger (both hold, so does it)."""
     started = time.perf_counter()
-    pieces, _ = start_pieces(regions)
-    m = int(pieces.region[-1]) + 1
     share = 1.0 if method == "one-tree" else _ONE_TREE_SHARE
-    value, rounds = one_tree_bound(pieces, m, upper, share * time_limit_s, gap_target)
-    kept = m - (regions.depot_xy is not None)
-    found = Bound(min(value, upper), f"one-tree over all {kept}", rounds, pieces.n, 0.0)
-    if method == "auto" and upper - value > gap_target * value:
+    found = _one_tree(regions, upper, share * time_limit_s, gap_target)
+    kept = int(np.count_nonzero(~skipped_regions(regions)))
+    if method == "auto" and upper - found.value > gap_target * found.value:
         chosen = sorted(spread_subset(regions, ORDER_MAX_REGIONS))
         sub = _subset(regions, chosen)
         left = max(time_limit_s - (time.perf_counter() - started), 0.0)
@@ -273,6 +273,33 @@ def _all_regions(
                 relaxed_tour_xy=order.relaxed_tour_xy,
             )
     return replace(found, seconds=time.perf_counter() - started)
+
+
+def _one_tree(regions: RegionSet, upper: float, time_limit_s: float, gap_target: float) -> Bound:
+    """The 1-tree bound over every region's pieces (the first round whatever the clock)."""
+    pieces, _ = start_pieces(regions)
+    m = int(pieces.region[-1]) + 1
+    value, rounds = one_tree_bound(pieces, m, upper, time_limit_s, gap_target)
+    kept = m - (regions.depot_xy is not None)
+    return Bound(min(value, upper), f"one-tree over all {kept}", rounds, pieces.n, 0.0)
+
+
+def _order_then_one_tree(
+    regions: RegionSet, upper: float, time_limit_s: float, gap_target: float, exact_shapes: bool
+) -> Bound:
+    """The order search over every region; where it stops short of the gap target without
+    finishing, the 1-tree over them all in the time left (at least its share), the larger
+    kept. Over small regions far apart (where tours barely bend at each) the 1-tree is
+    Held-Karp's bound on nearly points, which the order search reaches only by finishing."""
+    started = time.perf_counter()
+    found = _order(regions, upper, (1.0 - _ONE_TREE_SHARE) * time_limit_s, gap_target, exact_shapes)
+    if found.order_finished or upper - found.value <= gap_target * found.value:
+        return found
+    left = max(time_limit_s - (time.perf_counter() - started), 0.0)
+    tree = _one_tree(regions, upper, left, gap_target)
+    if tree.value > found.value:
+        return replace(found, value=tree.value, method=tree.method, rounds=tree.rounds)
+    return found
 
 
 def _order(

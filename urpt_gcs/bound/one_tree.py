@@ -13,6 +13,11 @@ and only the nearest pairs (a KD-tree's neighbours) weigh their pieces one by on
 algorithm runs over the complete graph with the weights computed as it goes: time
 quadratic in the regions per round, memory linear. Every round's value is a valid bound, so
 the best so far holds whenever the clock stops the subgradient ascent.
+
+The ascent's direction per piece is its degree in the 1-tree less two where it is its
+region's piece of largest multiplier (ties going to the piece the tree uses most), plus the
+region's degree less two on every piece of the region: Held-Karp's node penalty, which is a
+shift of all of a region's multipliers at once. On points this is Held-Karp itself.
 """
 
 from __future__ import annotations
@@ -65,6 +70,8 @@ _LEAST_STEP = 1e-5
 _AIM = 0.05
 # Rounding: a reported bound is lowered by this share of its size.
 _ROUNDING = 1e-9
+# Multipliers this close (relative) to a region's largest count as tied with it.
+_TIE = 1e-12
 
 
 @nb.njit(cache=True)
@@ -197,8 +204,20 @@ def _round(
             deg[amin[s]] += 1.0
             deg[amin[i]] += 1.0
     for i in range(m):
-        total -= 2.0 * mu[amax[i]]
-        deg[amax[i]] -= 2.0
+        top = mu[amax[i]]
+        total -= 2.0 * top
+        # Of the pieces of largest multiplier, the one the tree uses most takes the -2: at
+        # the start (every multiplier 0) any other choice points away from every ascent.
+        pick, used = amax[i], 0.0
+        for p in range(start[i], start[i + 1]):
+            used += deg[p]
+            if mu[p] >= top - _TIE * (1.0 + abs(top)) and deg[p] > deg[pick]:
+                pick = p
+        deg[pick] -= 2.0
+        # And Held-Karp's own direction, the region's degree less two, on all its pieces
+        # alike (a shift of all of a region's multipliers is its node penalty).
+        for p in range(start[i], start[i + 1]):
+            deg[p] += used - 2.0
     return total
 
 
