@@ -149,3 +149,20 @@ def test_the_certificate_over_300_targets_covers_every_one() -> None:
     first = lower_bound(regions, 1e7, 0.0, method="one-tree")
     assert first.method == f"one-tree over all {kept}"
     assert cert.lower_bound_m >= first.value
+
+
+def test_small_regions_far_apart_are_bounded_by_the_one_tree_as_well() -> None:
+    """Sixty small discs far apart: the order search stops short of them, and the 1-tree
+    (Held-Karp on nearly points) is the stronger; a crowded set keeps the order search."""
+    rng = np.random.default_rng(8)
+    n = 60
+    xy = rng.uniform(0, 2000, (n, 2))
+    depot = (1000.0, 1000.0)
+    sparse = RegionSet(discs=np.column_stack([xy, np.full(n, 2.0)]), depot_xy=depot)
+    tour = _greedy_tour(xy, depot)
+    auto = lower_bound(sparse, tour, 1.0)
+    order = lower_bound(sparse, tour, 1.0, method="order")
+    assert auto.method == f"one-tree over all {n}"
+    assert order.value < auto.value <= tour
+    crowded = RegionSet(discs=np.column_stack([xy, np.full(n, 150.0)]), depot_xy=depot)
+    assert lower_bound(crowded, tour, 0.5).method in ("order", f"tube over all {n}")

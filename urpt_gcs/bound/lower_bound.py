@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
+from scipy.sparse.csgraph import minimum_spanning_tree
 from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
@@ -58,6 +59,12 @@ EXACT_MAX_REGIONS = 9
 ORDER_MAX_REGIONS = 150
 # Share of the time the 1-tree bound over every region takes when both run.
 _ONE_TREE_SHARE = 0.25
+# Up to ORDER_MAX_REGIONS regions, the 1-tree runs beside the order search only where the
+# spanning tree of the gaps between the regions' discs is at least this share of that of
+# their centres: where they crowd (a lower share) its relaxation, which gains the regions'
+# whole width at every turn, is the weaker and the order search keeps all the time
+# (benchmarks/README.md, "The certified bound on the classic CETSP instances").
+_FAR_APART = 0.7
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,6 +299,8 @@ def _order_then_one_tree(
     kept. Over small regions far apart (where tours barely bend at each) the 1-tree is
     Held-Karp's bound on nearly points, which the order search reaches only by finishing."""
     started = time.perf_counter()
+    if not _far_apart(regions):
+        return _order(regions, upper, time_limit_s, gap_target, exact_shapes)
     found = _order(regions, upper, (1.0 - _ONE_TREE_SHARE) * time_limit_s, gap_target, exact_shapes)
     if found.order_finished or upper - found.value <= gap_target * found.value:
         return found
@@ -300,6 +309,26 @@ def _order_then_one_tree(
     if tree.value > found.value:
         return replace(found, value=tree.value, method=tree.method, rounds=tree.rounds)
     return found
+
+
+def _far_apart(regions: RegionSet) -> bool:
+    """Whether the regions kept lie far apart for their size: the spanning tree of the gaps
+    between their enclosing discs is at least :data:`_FAR_APART` of the spanning tree of
+    their centres (quadratic in the regions: for the few the order search takes)."""
+    cx, cy, cr = star_discs(regions)
+    kept = ~skipped_regions(regions)
+    xy = np.column_stack([cx[kept], cy[kept]])
+    if regions.depot_xy is not None:
+        xy = np.vstack([xy, regions.depot_xy])
+    r = np.append(cr[kept], 0.0) if regions.depot_xy is not None else cr[kept]
+    if len(r) < 3:
+        return False
+    centres = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    # A hair above zero: the spanning tree leaves out edges of weight 0 as missing.
+    gaps = np.maximum(centres - r[:, None] - r[None, :], 0.0) + 1e-12 * (1.0 + centres.max())
+    np.fill_diagonal(gaps, 0.0)
+    whole = float(minimum_spanning_tree(centres).sum())
+    return whole > 0.0 and float(minimum_spanning_tree(gaps).sum()) >= _FAR_APART * whole
 
 
 def _order(
