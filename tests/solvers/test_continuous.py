@@ -769,3 +769,32 @@ def test_a_stalled_search_escapes_only_on_few_discs(
     assert sorted(got_seq.tolist()) == list(range(n))
     tour = np.vstack([depot, got])
     assert (_polyline_distance(tour, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9) + 1e-9).all()
+
+
+def test_discs_far_smaller_than_their_coordinates_are_entered() -> None:
+    """Radii of a micrometre at coordinates of a kilometre: the searches keep a hair inside
+    relative to the radius, below the coordinates' rounding; every touch point must still
+    lie in its disc (the code before stopped on its own check, 'left a region')."""
+    rng = np.random.default_rng(0)
+    n = 40
+    for radius in (1e-6, 1e-4):
+        discs = np.column_stack([rng.uniform(0, 2000, (n, 2)), np.full(n, radius)])
+        regions = RegionSet(discs=discs, depot_xy=(1000.0, 1000.0))
+        tour = solve_regions(regions, SolveSettings(time_limit_s=1.0))
+        at = discs[tour.touch_region]
+        assert sorted(tour.touch_region.tolist()) == list(range(n))
+        assert np.all(np.hypot(*(tour.touch_xy - at[:, :2]).T) <= at[:, 2])
+        assert 0.0 < tour.lower_bound <= tour.length
+
+
+def test_crowded_discs_are_bounded_by_the_tube_when_it_is_larger() -> None:
+    """Three hundred discs crowding a square: the order search over them all is weak, the
+    tube bound counts every disc at once; the tour reports the larger, below its length."""
+    rng = np.random.default_rng(4)
+    n = 300
+    discs = np.column_stack([rng.uniform(0, 1000, (n, 2)), np.full(n, 20.0)])
+    regions = RegionSet(discs=discs, depot_xy=(500.0, 500.0))
+    tour = solve_regions(regions, SolveSettings(time_limit_s=2.0))
+    assert tour.bound is not None
+    assert tour.bound.method == f"tube over all {n}"
+    assert 0.0 < tour.lower_bound <= tour.length

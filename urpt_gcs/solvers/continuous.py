@@ -20,12 +20,14 @@ import math
 import threading
 import time
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.bound.lower_bound import Bound, lower_bound
+from urpt_gcs.bound.pieces import star_discs
+from urpt_gcs.bound.tube import tube_bound
 from urpt_gcs.errors import PlanError
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.problem.regions import RegionSet
@@ -209,6 +211,7 @@ def solve_regions(
         length = closed_length(pts, regions.depot_xy)
         if length < best_len:
             best_len, best_seq, best_pts = length, seq, pts
+    best_pts = _inside_discs(regions, best_seq, best_pts)
     inside = regions.contains(best_pts, best_seq)
     if not inside.all() or np.unique(best_seq).size != regions.n:
         raise PlanError("internal check failed: a refined tour left a region; report this")
@@ -216,6 +219,12 @@ def solve_regions(
     # The order search over every disc: its relaxed tour meets them all, so a tour may be
     # read off it (below); ``auto`` would bound large instances over a subset.
     bound = lower_bound(regions, best_len, left, gap_target, method="order")
+    # The tube bound counts every region at once, in milliseconds: where regions crowd it is
+    # far above the order search's over them all.
+    cx, cy, cr = star_discs(regions)
+    tube, _ = tube_bound(np.column_stack([cx, cy]), cr, regions.depot_xy)
+    if tube > bound.value:
+        bound = replace(bound, value=min(tube, best_len), method=f"tube over all {regions.n}")
     # For discs the bound's search meets real tours: the shortest it met may beat ours.
     relaxed = _from_relaxed(regions, bound.relaxed_tour_xy)
     if relaxed is not None:
@@ -234,6 +243,27 @@ def solve_regions(
         optimal_over_candidates=first.proven_optimal,
         solve_s=time.perf_counter() - started,
     )
+
+
+def _inside_discs(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
+    """The touch points, each drawn onto its disc where rounding left it outside (discs far
+    smaller than their coordinates: the searches keep a hair inside relative to the radius,
+    which is below the coordinates' rounding): moved onto the radius a hair inside, or onto
+    the centre where even that rounds outside. Polygons are left as they are."""
+    if regions.discs is None:
+        return pts
+    out = regions.contains(pts, seq)
+    if out.all():
+        return pts
+    pts = pts.copy()
+    d = regions.discs[seq[~out]]
+    away = pts[~out] - d[:, :2]
+    far = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-300)
+    pulled = d[:, :2] + away * (d[:, 2] * (1.0 - 1e-6) / far)[:, None]
+    still = np.hypot(*(pulled - d[:, :2]).T) > d[:, 2]
+    pulled[still] = d[still, :2]
+    pts[~out] = pulled
+    return pts
 
 
 def _from_relaxed(
