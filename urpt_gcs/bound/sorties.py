@@ -23,7 +23,10 @@ replaces ``M``: the sorties joined at home are one closed flight.
 inside the disc; summed, ``2 * integral_0^rho #{j : R_j >= s} ds``, and the count at ``s``
 is at least that of any larger radius, and up to the nearest region's distance it is every
 sortie. With what the pieces outside need, for every ``rho``:
-``L >= 2 * integral_0^rho K(s) ds + M(rho)``; the bound is the largest of those and ``B``.
+``L >= 2 * integral_0^rho K(s) ds + M(rho)``; the bound is the largest of those, ``B``, and
+where two sorties or more are needed the K-tree bound (:mod:`urpt_gcs.bound.k_tree`: a
+spanning forest of that many trees over the regions and twice as many legs home, raised by
+multipliers as Held and Karp raise a 1-tree).
 
 *Time.* A sortie's return leg is no longer than the rest of it, so at most half its length
 is flown at the return speed, the rest at the cruise speed (each leg no faster than its
@@ -69,6 +72,7 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from urpt_gcs.arrays import FloatArray
 from urpt_gcs.bound.geometric import PACKING_LP_MAX_CIRCLES, stop_packing
+from urpt_gcs.bound.k_tree import k_tree_bound
 from urpt_gcs.problem.flight_time import FlightModel
 from urpt_gcs.problem.regions import OuterStar
 
@@ -178,7 +182,8 @@ class SortieBound:
     single_m
         The single-tour bound it started from.
     radius_m
-        The radius whose count of far sorties gave ``length_m`` (0: the single-tour bound).
+        The radius whose count of far sorties gave ``length_m`` (0: the single-tour bound or
+        the K-tree's).
     stops
         How many stops at least.
     spread
@@ -326,8 +331,12 @@ def sortie_bound(
     home_distance_m: FloatArray,
     single_m: float,
     budget: SortieBudget,
+    upper_m: float = math.inf,
+    time_limit_s: float = 0.0,
 ) -> SortieBound:
-    """The lower bound of the module's text for sorties over regions inside circles.
+    """The lower bound of the module's text for sorties over regions inside circles; where
+    at least two sorties are needed, also the K-tree bound of their length
+    (:func:`~urpt_gcs.bound.k_tree.k_tree_bound`), the larger kept.
 
     Parameters
     ----------
@@ -340,6 +349,10 @@ def sortie_bound(
         A lower bound of every closed flight from home that photographs every target.
     budget
         What one sortie may spend.
+    upper_m
+        The length of a known flight, where the K-tree's ascent aims and stops.
+    time_limit_s
+        Seconds for the K-tree's ascent (its first round always runs).
 
     Returns
     -------
@@ -412,6 +425,10 @@ def sortie_bound(
         inside += 2.0 * counts[m] * (radii[m] - radii[m - 1])
         if inside + trees[m] > best:
             best, at = inside + trees[m], float(radii[m])
+    if counts[0] >= 2:
+        tree = k_tree_bound(xy, reach, r, int(counts[0]), upper_m, time_limit_s)
+        if tree > best:
+            best, at = tree, 0.0
     packed, spread = beyond(0.0)
     out = SortieBound(
         length_m=float(best),

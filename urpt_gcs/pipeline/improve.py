@@ -37,6 +37,9 @@ from urpt_gcs.visibility.outer import warm_up as warm_walks
 # whatever the clock) may take to walk; the bound itself has the rest, and never less than
 # this share, so the stage keeps to its time unless the first stars alone overrun it.
 _WALK_SHARE = 0.5
+# Share of the bound's time the K-tree bound of sorties takes (with an endurance), from the
+# time the bound of one flight would have had.
+_SORTIES_SHARE = 0.15
 
 # How much shorter a tour read off the bound must be to replace the refined one.
 _BETTER = 1e-6
@@ -189,7 +192,10 @@ def certify_flight(
     )
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
-    left_s = max(time_limit_s - (time.perf_counter() - started), _WALK_SHARE * time_limit_s)
+    sorties_s = _SORTIES_SHARE * time_limit_s if settings.endurance_min is not None else 0.0
+    left_s = max(
+        time_limit_s - sorties_s - (time.perf_counter() - started), _WALK_SHARE * time_limit_s
+    )
     single = certify(regions, min(flown_m, tour_m), left_s, also, ratio, tighten)
     if budget is None:
         endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
@@ -201,6 +207,8 @@ def certify_flight(
         star_distances(stars, site.home_xy),
         single.lower_bound_m,
         budget,
+        flown_m,
+        sorties_s,
     )
     value = float(max(single.lower_bound_m, min(sorties.length_m, flown_m)))
     method = single.method if value <= single.lower_bound_m else f"{single.method} + sorties"
