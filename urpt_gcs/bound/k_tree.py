@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -82,9 +83,10 @@ def k_tree_bound(
     at_least: int,
     upper_m: float,
     time_limit_s: float,
-) -> float:
+    recount: Callable[[float], int] | None = None,
+) -> tuple[float, int]:
     """The best K-tree bound of the module's text found within ``time_limit_s`` (the first
-    round always runs), 0 where it is not tried.
+    round always runs), 0 where it is not tried, and the count of sorties it holds for.
 
     Parameters
     ----------
@@ -98,6 +100,10 @@ def k_tree_bound(
         The length of a known flight: the ascent aims its steps below it and stops there.
     time_limit_s
         Seconds for the ascent.
+    recount
+        How many sorties a length proves (every flight being at least the bound, it needs
+        at least that many): whenever the bound proves more than ``at_least``, the ascent
+        goes on over that many, from the multipliers it has.
     """
     started = time.perf_counter()
     xy = np.asarray(centres_xy, dtype=np.float64).reshape(-1, 2)
@@ -105,7 +111,7 @@ def k_tree_bound(
     home = np.asarray(home_distance_m, dtype=np.float64)
     n = home.size
     if n == 0 or at_least < 1 or at_least > n or n > K_TREE_MAX_REGIONS:
-        return 0.0
+        return 0.0, at_least
     # A hair more reach, so that rounding cannot make a gap too long.
     reach = reach * (1.0 + 1e-12) + 1e-12
     apart = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
@@ -119,6 +125,11 @@ def k_tree_bound(
         value, degree = _round(gaps, home, pi, at_least)
         if value > best:
             best, best_pi[:], stall = value, pi, 0
+            more = at_least if recount is None else min(recount(best), n)
+            if more > at_least:
+                # A longer bound over more sorties: the same multipliers, a fresh step.
+                at_least, step_share = more, 1.0
+                continue
         else:
             stall += 1
         if best >= upper_m or time.perf_counter() - started >= time_limit_s:
@@ -136,4 +147,4 @@ def k_tree_bound(
             break  # every region meets two edges: the structure is a set of sorties
         aim = upper_m if math.isfinite(upper_m) else 1.05 * abs(best) + 1.0
         pi += step_share * max(aim - value, 1e-9 * abs(aim)) / norm * g
-    return max(best - _ROUNDING * abs(best), 0.0)
+    return max(best - _ROUNDING * abs(best), 0.0), at_least

@@ -418,17 +418,24 @@ def sortie_bound(
     # A sortie that reaches past a radius reaches past every smaller one too; and every
     # sortie reaches the nearest region, so up to its distance all of them count.
     counts = np.maximum.accumulate(counts[::-1])[::-1]
+    tree = 0.0
+    if counts[0] >= 2:
+        # The K-tree over the count proven; its length, a bound of every flight, may prove
+        # more sorties, and more sorties a longer K-tree.
+        stops_all, spread_all = beyond(0.0)
+
+        def recount(length_m: float) -> int:
+            return _far_sorties(max(length_m, single_m), 0.0, stops_all, spread_all, budget)
+
+        tree, k = k_tree_bound(xy, reach, r, int(counts[0]), upper_m, time_limit_s, recount)
+        counts[0] = max(counts[0], k)
     counts[radii <= r.min()] = counts[0]
-    best, at = single_m, 0.0
+    best, at = max(single_m, tree), 0.0
     inside = 0.0
     for m in range(1, radii.size):
         inside += 2.0 * counts[m] * (radii[m] - radii[m - 1])
         if inside + trees[m] > best:
             best, at = inside + trees[m], float(radii[m])
-    if counts[0] >= 2:
-        tree = k_tree_bound(xy, reach, r, int(counts[0]), upper_m, time_limit_s)
-        if tree > best:
-            best, at = tree, 0.0
     packed, spread = beyond(0.0)
     out = SortieBound(
         length_m=float(best),
