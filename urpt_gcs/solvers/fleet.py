@@ -386,6 +386,19 @@ def solve_fleet(
         moved, _ = descend(routes, deadline, long_round=False)
         moves += moved
     routes = _no_later_than_alone(routes, order, reference, by_target)
+    return _tours(routes, naive_times, start_times, moves, resolves, started, offsets)
+
+
+def _tours(
+    routes: list[_Route],
+    naive_times: Sequence[float],
+    start_times: Sequence[float],
+    moves: int,
+    resolves: int,
+    started: float,
+    offsets: Sequence[float],
+) -> FleetTours:
+    """The routes as the fleet's tours, each target counted for one vehicle."""
     owners = _owners(routes)
     return FleetTours(
         orders=tuple(tuple(r.order) for r in routes),
@@ -394,7 +407,7 @@ def solve_fleet(
         ),
         times_s=tuple(r.time_s for r in routes),
         naive_times_s=tuple(naive_times),
-        start_times_s=start_times,
+        start_times_s=tuple(start_times),
         moves=moves,
         resolves=resolves,
         search_s=time.perf_counter() - started,
@@ -425,20 +438,7 @@ def naive_tours(
         _Route(v, _carried(v, c, reference, _viewpoints_by_target(v.instance)), offsets[k])
         for k, (v, c) in enumerate(zip(vehicles, cut, strict=True))
     ]
-    owners = _owners(routes)
-    return FleetTours(
-        orders=tuple(tuple(r.order) for r in routes),
-        targets=tuple(
-            tuple(int(t) for t in np.flatnonzero(owners == k)) for k in range(len(routes))
-        ),
-        times_s=tuple(r.time_s for r in routes),
-        naive_times_s=tuple(times),
-        start_times_s=tuple(r.time_s for r in routes),
-        moves=0,
-        resolves=0,
-        search_s=time.perf_counter() - started,
-        offsets_s=tuple(offsets),
-    )
+    return _tours(routes, times, [r.time_s for r in routes], 0, 0, started, offsets)
 
 
 def _no_later_than_alone(
