@@ -37,8 +37,9 @@ from urpt_gcs.visibility.outer import warm_up as warm_walks
 # whatever the clock) may take to walk; the bound itself has the rest, and never less than
 # this share, so the stage keeps to its time unless the first stars alone overrun it.
 _WALK_SHARE = 0.5
-# Share of the bound's time the K-tree bound of sorties takes (with an endurance), from the
-# time the bound of one flight would have had.
+# Share of the bound's time the K-tree bound of sorties takes at least, after the bound of
+# one flight (which keeps its whole time: the stage runs over by up to this share where two
+# sorties or more are proven).
 _SORTIES_SHARE = 0.15
 
 # How much shorter a tour read off the bound must be to replace the refined one.
@@ -192,11 +193,11 @@ def certify_flight(
     )
     also = geometric_lower_bound(instance)
     tighten = finer_stars(area.terrain, area.camera, workers, hold_m)
-    sorties_s = _SORTIES_SHARE * time_limit_s if settings.endurance_min is not None else 0.0
-    left_s = max(
-        time_limit_s - sorties_s - (time.perf_counter() - started), _WALK_SHARE * time_limit_s
-    )
+    left_s = max(time_limit_s - (time.perf_counter() - started), _WALK_SHARE * time_limit_s)
     single = certify(regions, min(flown_m, tour_m), left_s, also, ratio, tighten)
+    # What is left of the stage's time, and at least its share, for the K-tree of sorties
+    # (which takes it only where two sorties or more are proven).
+    sorties_s = max(time_limit_s - (time.perf_counter() - started), _SORTIES_SHARE * time_limit_s)
     if budget is None:
         endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
         budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
