@@ -16,6 +16,7 @@ from urpt_gcs.problem.instance import Instance
 
 __all__ = [
     "DISC_PACKING_ALPHA",
+    "circle_gaps",
     "depot_bound",
     "disc_packing_bound",
     "geometric_lower_bound",
@@ -34,6 +35,18 @@ _IN_REL, _IN_ABS = 1e-9, 1e-6
 
 # Tekdas et al.: a tour through k disjoint discs of radius r is at least k/2 * alpha * r (k >= 3).
 DISC_PACKING_ALPHA = 0.4786
+
+
+def circle_gaps(centres_xy: FloatArray, reach_m: FloatArray) -> FloatArray:
+    """The dense matrix of gaps between circles (0 where they meet, and on the diagonal):
+    no longer than the distance between any point of one and any point of the other. Each
+    reach is taken a hair larger, so that rounding cannot make a gap too long."""
+    xy = np.asarray(centres_xy, dtype=np.float64).reshape(-1, 2)
+    reach = np.asarray(reach_m, dtype=np.float64) * (1.0 + 1e-12) + 1e-12
+    apart = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    gaps: FloatArray = np.maximum(apart - reach[:, None] - reach[None, :], 0.0)
+    np.fill_diagonal(gaps, 0.0)
+    return gaps
 
 
 def greedy_disjoint(centers_xy: FloatArray, radius_m: float) -> list[int]:

@@ -34,6 +34,7 @@ import numpy.typing as npt
 from scipy.sparse.csgraph import minimum_spanning_tree
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import circle_gaps
 
 __all__ = ["K_TREE_MAX_REGIONS", "k_tree_bound"]
 
@@ -112,12 +113,7 @@ def k_tree_bound(
     n = home.size
     if n == 0 or at_least < 1 or at_least > n or n > K_TREE_MAX_REGIONS:
         return 0.0, at_least
-    # A hair more reach, so that rounding cannot make a gap too long.
-    reach = reach * (1.0 + 1e-12) + 1e-12
-    apart = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
-    gaps = np.maximum(apart - reach[:, None] - reach[None, :], 0.0)
-    del apart
-    np.fill_diagonal(gaps, 0.0)
+    gaps = circle_gaps(xy, reach)
     pi = np.zeros(n)
     best_pi = pi.copy()
     best, step_share, stall = -math.inf, 1.0, 0

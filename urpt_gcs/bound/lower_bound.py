@@ -22,6 +22,7 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from shapely.geometry import Polygon
 
 from urpt_gcs.arrays import FloatArray
+from urpt_gcs.bound.geometric import circle_gaps
 from urpt_gcs.bound.one_tree import one_tree_bound
 from urpt_gcs.bound.order_bound import order_bound
 from urpt_gcs.bound.pieces import (
@@ -47,7 +48,9 @@ __all__ = [
     "spread_order",
     "spread_subset",
     "subset_bound",
+    "tube_over",
     "warm_up",
+    "with_tube",
 ]
 
 I64 = npt.NDArray[np.int64]
@@ -130,15 +133,13 @@ def lower_bound(
     started = time.perf_counter()
     kept = int(np.count_nonzero(~skipped_regions(regions)))
     if method == "auto":
-        cx, cy, cr = star_discs(regions)
-        tube, _ = tube_bound(np.column_stack([cx, cy]), cr, regions.depot_xy)
+        tube = tube_over(regions)
         left = max(time_limit_s - (time.perf_counter() - started), 0.0)
         if kept <= ORDER_MAX_REGIONS:
             found = _order_then_one_tree(regions, upper, left, gap_target, exact_shapes)
         else:
             found = _all_regions(regions, upper, left, gap_target, exact_shapes, method)
-        if tube > found.value:
-            found = replace(found, value=min(tube, upper), method=f"tube over all {regions.n}")
+        found = with_tube(found, tube, regions, upper)
         return replace(found, seconds=time.perf_counter() - started)
     if method == "order":
         return _order(regions, upper, time_limit_s, gap_target, exact_shapes)
@@ -190,6 +191,22 @@ def lower_bound(
             best, method = sub.value, f"subset of {EXACT_MAX_REGIONS}"
         rounds += sub.rounds
     return Bound(min(best, upper), method, rounds, pieces.n, time.perf_counter() - started)
+
+
+def tube_over(regions: RegionSet) -> float:
+    """The tube bound (:func:`~urpt_gcs.bound.tube.tube_bound`) over every region's
+    enclosing disc, and the depot."""
+    cx, cy, cr = star_discs(regions)
+    tube, _ = tube_bound(np.column_stack([cx, cy]), cr, regions.depot_xy)
+    return tube
+
+
+def with_tube(found: Bound, tube_m: float, regions: RegionSet, upper: float) -> Bound:
+    """``found``, or the tube bound ``tube_m`` over every region where it is larger (never
+    past the known tour ``upper``)."""
+    if tube_m <= found.value:
+        return found
+    return replace(found, value=min(tube_m, upper), method=f"tube over all {regions.n}")
 
 
 def spread_subset(regions: RegionSet, k: int) -> list[int]:
@@ -323,9 +340,9 @@ def _far_apart(regions: RegionSet) -> bool:
     r = np.append(cr[kept], 0.0) if regions.depot_xy is not None else cr[kept]
     if len(r) < 3:
         return False
-    centres = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    centres = circle_gaps(xy, np.zeros(len(r)))
     # A hair above zero: the spanning tree leaves out edges of weight 0 as missing.
-    gaps = np.maximum(centres - r[:, None] - r[None, :], 0.0) + 1e-12 * (1.0 + centres.max())
+    gaps = circle_gaps(xy, r) + 1e-12 * (1.0 + centres.max())
     np.fill_diagonal(gaps, 0.0)
     whole = float(minimum_spanning_tree(centres).sum())
     return whole > 0.0 and float(minimum_spanning_tree(gaps).sum()) >= _FAR_APART * whole

@@ -20,14 +20,12 @@ import math
 import threading
 import time
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from urpt_gcs.arrays import FloatArray, IntArray
-from urpt_gcs.bound.lower_bound import Bound, lower_bound
-from urpt_gcs.bound.pieces import star_discs
-from urpt_gcs.bound.tube import tube_bound
+from urpt_gcs.bound.lower_bound import Bound, lower_bound, tube_over, with_tube
 from urpt_gcs.errors import PlanError
 from urpt_gcs.problem.instance import Instance
 from urpt_gcs.problem.regions import RegionSet
@@ -221,10 +219,7 @@ def solve_regions(
     bound = lower_bound(regions, best_len, left, gap_target, method="order")
     # The tube bound counts every region at once, in milliseconds: where regions crowd it is
     # far above the order search's over them all.
-    cx, cy, cr = star_discs(regions)
-    tube, _ = tube_bound(np.column_stack([cx, cy]), cr, regions.depot_xy)
-    if tube > bound.value:
-        bound = replace(bound, value=min(tube, best_len), method=f"tube over all {regions.n}")
+    bound = with_tube(bound, tube_over(regions), regions, best_len)
     # For discs the bound's search meets real tours: the shortest it met may beat ours.
     relaxed = _from_relaxed(regions, bound.relaxed_tour_xy)
     if relaxed is not None:
@@ -246,10 +241,10 @@ def solve_regions(
 
 
 def _inside_discs(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
-    """The touch points, each drawn onto its disc where rounding left it outside (discs far
-    smaller than their coordinates: the searches keep a hair inside relative to the radius,
-    which is below the coordinates' rounding): moved onto the radius a hair inside, or onto
-    the centre where even that rounds outside. Polygons are left as they are."""
+    """The touch points, each drawn onto its disc where rounding left it outside (on the rim,
+    or discs far smaller than their coordinates, where a hair inside relative to the radius
+    is below the coordinates' rounding): moved onto the radius a hair inside, or onto the
+    centre where even that rounds outside. Polygons are left as they are."""
     if regions.discs is None:
         return pts
     out = regions.contains(pts, seq)
@@ -259,7 +254,7 @@ def _inside_discs(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatAr
     d = regions.discs[seq[~out]]
     away = pts[~out] - d[:, :2]
     far = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-300)
-    pulled = d[:, :2] + away * (d[:, 2] * (1.0 - 1e-6) / far)[:, None]
+    pulled = d[:, :2] + away * (d[:, 2] * (1.0 - 1e-9) / far)[:, None]
     still = np.hypot(*(pulled - d[:, :2]).T) > d[:, 2]
     pulled[still] = d[still, :2]
     pts[~out] = pulled
@@ -303,14 +298,10 @@ def _from_relaxed(
         pts[lo : lo + step], far[lo : lo + step] = near[i, j], dist[i, j]
     if np.any(far > r * (1.0 + 1e-9)):
         return None
-    # On the rim to rounding: a hair inside.
-    rim = far > r * (1.0 - 1e-12)
-    pts[rim] = c[rim] + (pts[rim] - c[rim]) * (r[rim] * (1.0 - 1e-12) / far[rim])[:, None]
     order = np.lexsort((along, seg))
-    seq, pts = k[order].astype(np.int64), pts[order]
-    if not regions.contains(pts, seq).all():
-        return None
-    return seq, pts
+    seq = k[order].astype(np.int64)
+    # On the rim to rounding: drawn inside.
+    return seq, _inside_discs(regions, seq, pts[order])
 
 
 def _refine(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
