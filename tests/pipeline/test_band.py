@@ -5,6 +5,7 @@ dense samples of the DSM (:mod:`support.independent`, which shares no code with 
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from pathlib import Path
 
@@ -162,6 +163,12 @@ def _mountain(
     assert result.band_flight is not None
     # The flight flown is one of those the time bound is below, sorties and all.
     assert result.band_flight.time_bound_s <= result.flight_time_s
+    # The sorties proven are no more than flown, and their horizontal bound (the returns
+    # home included) no more than the horizontal length flown.
+    cert = result.certificate
+    assert cert is not None and cert.sorties is not None
+    assert 1 <= cert.sorties.sorties <= len(result.missions)
+    assert cert.lower_bound_m <= math.fsum(s.length_m for s in result.sorties) * (1 + 1e-9)
     print(
         f"{name}, {count} targets: {result.band_flight.inserted} inserted waypoints, "
         f"{len(result.missions)} sorties, {low:.2f} to {high:.2f} m above the surface"

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -43,8 +44,11 @@ from urpt_gcs.problem.regions import OuterStar, RegionSet
 __all__ = [
     "EXACT_MAX_REGIONS",
     "ORDER_MAX_REGIONS",
+    "RETURNS_MAX_REGIONS",
     "Bound",
     "lower_bound",
+    "returns_bound",
+    "sorties_through",
     "spread_order",
     "spread_subset",
     "subset_bound",
@@ -60,6 +64,9 @@ EXACT_MAX_REGIONS = 9
 # Regions the order search of method "auto" takes at most: beyond, it bounds that many far
 # apart (every tour enters those too) and the 1-tree bound covers them all.
 ORDER_MAX_REGIONS = 150
+# Regions up to which a plan's sortie bound also runs the order search with the depot's
+# copies (:func:`returns_bound`): it branches on every region between two passes home.
+RETURNS_MAX_REGIONS = 40
 # Share of the time the 1-tree bound over every region takes when both run.
 _ONE_TREE_SHARE = 0.25
 # Up to ORDER_MAX_REGIONS regions, the 1-tree runs beside the order search only where the
@@ -348,8 +355,47 @@ def _far_apart(regions: RegionSet) -> bool:
     return whole > 0.0 and float(minimum_spanning_tree(gaps).sum()) >= _FAR_APART * whole
 
 
+def sorties_through(regions: RegionSet, upper: float) -> Callable[[int, float], float] | None:
+    """For :func:`urpt_gcs.bound.sorties.sortie_bound`: the bound of flights of at least
+    ``k`` sorties from the depot by :func:`returns_bound`, given ``seconds``; None beyond
+    :data:`RETURNS_MAX_REGIONS` regions or without a depot."""
+    kept = int(np.count_nonzero(~skipped_regions(regions)))
+    if regions.depot_xy is None or kept > RETURNS_MAX_REGIONS:
+        return None
+
+    def bound(k: int, seconds: float) -> float:
+        return returns_bound(regions, upper, seconds, k - 1).value if k >= 2 else 0.0
+
+    return bound
+
+
+def returns_bound(regions: RegionSet, upper: float, time_limit_s: float, returns: int) -> Bound:
+    """A lower bound of every closed flight from the depot entering every region that comes
+    back to the depot ``returns`` times on the way, none of its ``returns + 1`` sorties
+    empty: the order search over the outer stars with the depot's copies
+    (:func:`~urpt_gcs.bound.order_bound.order_bound`'s ``returns``). Holds when stopped by
+    the clock; for a few tens of regions (it branches on every region between two passes
+    through the depot).
+
+    Raises
+    ------
+    ValueError
+        Without a depot.
+    """
+    if regions.depot_xy is None:
+        raise ValueError("returns_bound: the regions have no depot")
+    warm_up()
+    found = _order(regions, upper, time_limit_s, 1e-4, False, returns)
+    return replace(found, method=f"order with {returns} return{'s' * (returns != 1)} home")
+
+
 def _order(
-    regions: RegionSet, upper: float, time_limit_s: float, gap_target: float, exact_shapes: bool
+    regions: RegionSet,
+    upper: float,
+    time_limit_s: float,
+    gap_target: float,
+    exact_shapes: bool,
+    returns: int = 0,
 ) -> Bound:
     started = time.perf_counter()
     skip = skipped_regions(regions)
@@ -362,7 +408,9 @@ def _order(
         stars.append(None)
         if shapes is not None:
             shapes.append(None)
-    found = order_bound(stars, regions.depot_xy, upper, time_limit_s, gap_target, shapes)
+    found = order_bound(
+        stars, regions.depot_xy, upper, time_limit_s, gap_target, shapes, returns=returns
+    )
     return Bound(
         found.value, "order", 0, 0, time.perf_counter() - started,
         found.nodes, found.open_nodes, found.finished, found.leaf_length, found.leaf_xy,

@@ -71,6 +71,8 @@ class _Sets:
         self.verts: list[FloatArray] = []
         self.radius: list[float] = []
         self.region_of = np.zeros(0, dtype=np.int64)
+        # Regions from this one on are the depot's copies (order_bound's ``returns``).
+        self.copies_from = len(stars)
         self._arrays: tuple[I64, FloatArray, FloatArray, FloatArray] | None = None
         for i in range(len(stars)):
             self.get(i, 0, self.sectors(i))
@@ -169,6 +171,7 @@ def order_bound(
     shapes: list[Polygon | None] | None = None,
     max_nodes: int | None = None,
     strong: int | None = None,
+    returns: int = 0,
 ) -> OrderBound:
     """A lower bound of every closed tour entering every star (``None``: the depot point).
 
@@ -178,12 +181,26 @@ def order_bound(
     least value closed -- a polyline met that meets every set, or a pruned node -- past
     which the bound cannot rise, when nothing is left open, or at the time limit; the bound
     holds in every case (``finished`` in the first three). ``max_nodes`` also stops it after
-    that many node solves; ``strong`` is how many regions each branching tries."""
+    that many node solves; ``strong`` is how many regions each branching tries.
+
+    ``returns`` (with a depot, the last star): the tours pass through the depot that many
+    times more, as sorties from home joined at home do, ``returns + 1`` sorties at least.
+    The depot's copies are regions of the sequence like the others, each a point; one that
+    is missing is inserted before any other region (the lowest numbered first: they are
+    interchangeable), at every position, two copies side by side allowed (an empty
+    sortie), so the children still cover every such tour."""
     started = time.perf_counter()
+    if returns > 0:
+        if depot_xy is None or stars[-1] is not None:
+            raise ValueError("order_bound: returns need the depot, as the last star")
+        stars = [*stars, *([None] * returns)]
+        if shapes is not None:
+            shapes = [*shapes, *([None] * returns)]
     m = len(stars)
     if m <= 1:
         return OrderBound(0.0, 0, 0, True, 0.0)
     sets = _Sets(stars, depot_xy, shapes)
+    sets.copies_from = m - returns
     cx = np.asarray([s.center_xy[0] if s else depot_xy[0] for s in stars])  # type: ignore[index]
     cy = np.asarray([s.center_xy[1] if s else depot_xy[1] for s in stars])  # type: ignore[index]
     cr = np.asarray([float(s.reach_m.max()) if s else 0.0 for s in stars])
@@ -194,13 +211,14 @@ def order_bound(
 
     # The root: three regions far apart (the depot first, when there is one).
     first = (
-        [m - 1]
+        [m - 1 - returns]
         if depot_xy is not None
         else [int(np.argmax(np.hypot(cx - cx.mean(), cy - cy.mean()) + cr))]
     )
     while len(first) < min(3, m):
         gap = np.min([np.hypot(cx - cx[j], cy - cy[j]) - cr - cr[j] for j in first], axis=0)
         gap[first] = -np.inf
+        gap[sets.copies_from :] = -np.inf
         first.append(int(np.argmax(gap)))
     seq = np.asarray([j for j in first], dtype=np.int64)
     root = _Node(
@@ -309,6 +327,21 @@ def _branch(node: _Node, sets: _Sets, m: int, strong: int) -> list[list[_Node]] 
     them; up to ``strong`` regions to insert), or None when its polyline meets every set."""
     absent = np.ones(m, dtype=np.bool_)
     absent[sets.region_of[node.seq]] = False
+    copies = np.flatnonzero(absent[sets.copies_from :])
+    if copies.size:
+        # The depot's copies first: the polyline meets the depot already, but must pass it
+        # once more for each.
+        return [_insertions(node, sets.copies_from + int(copies[0]), sets)]
+    if sets.copies_from < m:
+        # Two passes through the depot side by side: an empty sortie, which the shortest
+        # flight does not fly (it would drop it). Some region not yet in the sequence comes
+        # between them; a child for each, the first there (none left: no completion).
+        home = sets.region_of[node.seq] >= sets.copies_from - 1
+        side_by_side = np.flatnonzero(home & np.roll(home, -1))
+        if side_by_side.size:
+            between = np.flatnonzero(absent[: sets.copies_from - 1])
+            at = int(side_by_side[0])
+            return [[_insertion(node, int(j), at, sets) for j in between]]
     slack = 1e-9 * (1.0 + abs(node.primal))
     vptr, vx, vy, rad = sets.arrays()
     missing = np.flatnonzero(absent)
@@ -352,6 +385,11 @@ def _copy(node: _Node) -> _Node:
         node.cert,
         node.primal,
     )
+
+
+def _insertion(node: _Node, region: int, after: int, sets: _Sets) -> _Node:
+    """The child inserting ``region`` after position ``after`` of the node's sequence."""
+    return _insertions(node, region, sets)[after]
 
 
 def _insertions(node: _Node, region: int, sets: _Sets) -> list[_Node]:

@@ -63,6 +63,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +81,7 @@ from urpt_gcs.problem.regions import OuterStar
 __all__ = [
     "CHAIN_GAPS",
     "DENSE_MAX_REGIONS",
+    "SORTIES_SHARE",
     "THRESHOLDS",
     "SortieBound",
     "SortieBudget",
@@ -87,6 +90,10 @@ __all__ = [
     "star_distances",
 ]
 
+# Share of a plan's bound stage the K-tree bound of sorties takes at least, after the bound
+# of one flight (which keeps its whole time: the stage runs over by up to this share where
+# two sorties or more are proven).
+SORTIES_SHARE = 0.15
 # Radii at which the count of far sorties is bounded (the regions' own distances from home,
 # evenly through their order): more is tighter and costs one spanning tree each.
 THRESHOLDS = 48
@@ -333,6 +340,7 @@ def sortie_bound(
     budget: SortieBudget,
     upper_m: float = math.inf,
     time_limit_s: float = 0.0,
+    returns_bound: Callable[[int, float], float] | None = None,
 ) -> SortieBound:
     """The lower bound of the module's text for sorties over regions inside circles; where
     at least two sorties are needed, also the K-tree bound of their length
@@ -352,7 +360,14 @@ def sortie_bound(
     upper_m
         The length of a known flight, where the K-tree's ascent aims and stops.
     time_limit_s
-        Seconds for the K-tree's ascent (its first round always runs).
+        Seconds for the K-tree's ascent (its first round always runs), and for
+        ``returns_bound``.
+    returns_bound
+        Where given, ``returns_bound(k, seconds)`` bounds every closed flight from home that
+        photographs every target in at least ``k`` sorties, none of them empty (as
+        :func:`~urpt_gcs.bound.lower_bound.returns_bound` does over the regions themselves):
+        where two sorties or more are proven it takes half the time, over the count the
+        K-tree leaves, and the larger is kept.
 
     Returns
     -------
@@ -427,8 +442,15 @@ def sortie_bound(
         def recount(length_m: float) -> int:
             return _far_sorties(max(length_m, single_m), 0.0, stops_all, spread_all, budget)
 
-        tree, k = k_tree_bound(xy, reach, r, int(counts[0]), upper_m, time_limit_s, recount)
+        started = time.perf_counter()
+        share = time_limit_s if returns_bound is None else 0.5 * time_limit_s
+        tree, k = k_tree_bound(xy, reach, r, int(counts[0]), upper_m, share, recount)
         counts[0] = max(counts[0], k)
+        if returns_bound is not None:
+            left = max(time_limit_s - (time.perf_counter() - started), 0.0)
+            homes = min(returns_bound(int(counts[0]), left), upper_m)
+            tree = max(tree, homes)
+            counts[0] = max(counts[0], recount(homes))
     counts[radii <= r.min()] = counts[0]
     best, at = max(single_m, tree), 0.0
     inside = 0.0

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -27,9 +28,9 @@ from scipy.spatial import cKDTree
 from urpt_gcs.arrays import BoolArray, FloatArray, IntArray
 from urpt_gcs.bound.certificate import Certificate, bound_time_s
 from urpt_gcs.bound.geometric import greedy_disjoint
-from urpt_gcs.bound.lower_bound import lower_bound
+from urpt_gcs.bound.lower_bound import lower_bound, sorties_through
 from urpt_gcs.bound.order_bound import prepare as prepare_bound
-from urpt_gcs.bound.sorties import SortieBudget, sortie_bound
+from urpt_gcs.bound.sorties import SORTIES_SHARE, SortieBudget, sortie_bound
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.band import FlightBand, band_profile
 from urpt_gcs.flight.band_refine import BandStops, refine_band_stops
@@ -166,10 +167,15 @@ def plan_in_band(site: SiteInputs, area: PlanArea, settings: PlanSettings, stage
         stages.lap("bound compile")
         stages.say(f"bounding the shortest possible flight in the band (up to {budget:.1f} s)")
         horizontal_m = math.fsum(s.length_m for s in flight.sorties)
+        started = time.perf_counter()
         outer = _outer(site, area, band, tol)
         certificate = _certify(outer, horizontal_m, budget)
+        # What is left of the stage, and at least its share, for the K-tree of sorties.
+        left_s = max(budget - (time.perf_counter() - started), SORTIES_SHARE * budget)
+        certificate, time_bound = _with_sorties(
+            site, area, band, model, outer, certificate, horizontal_m, settings, left_s
+        )
         horizontal_bound = certificate.lower_bound_m
-        time_bound = _time_bound(site, area, band, model, outer, horizontal_bound, settings)
         stages.lap("bound")
     band_flight = BandFlight(
         band=band,
@@ -601,53 +607,92 @@ def _certify(outer: BandOuter, horizontal_m: float, budget_s: float) -> Certific
     )
 
 
+def _with_sorties(
+    site: SiteInputs,
+    area: PlanArea,
+    band: FlightBand,
+    model: FlightModel,
+    outer: BandOuter,
+    certificate: Certificate,
+    horizontal_m: float,
+    settings: PlanSettings,
+    time_limit_s: float,
+) -> tuple[Certificate, float]:
+    """The certificate raised by what the endurance forces on sorties from home
+    (:func:`urpt_gcs.bound.sorties.sortie_bound`: their count and their horizontal length,
+    returns home included), and the band's bound of the flight time (:func:`_time_bound`).
+
+    A sortie in the band takes at least its take-off to the floor over home and its landing,
+    its stops, and its horizontal length at the cruise speed: every leg is flown in AUTO at
+    that speed, the way home too through waypoints that follow the terrain (RTL would fly
+    straight), and climbing only adds to a leg. That is the sortie bound's budget.
+    """
+    if settings.endurance_min is None:
+        return certificate, _time_bound(site, area, band, model, outer, certificate, 1)
+    speed = model.cruise_m_s
+    budget = SortieBudget(
+        endurance_s=settings.endurance_min * 60.0,
+        ends_s=model.takeoff_s(band.floor_m) + model.landing_s(band.floor_m),
+        stop_s=model.stop_s,
+        per_metre_s=1.0 / speed,
+    )
+    away = np.hypot(*(site.targets_xy - np.asarray(site.home_xy)).T) - outer.radius_m
+    found = sortie_bound(
+        site.targets_xy,
+        outer.radius_m,
+        np.maximum(away, 0.0),
+        certificate.lower_bound_m,
+        budget,
+        horizontal_m,
+        time_limit_s,
+        sorties_through(outer.regions, horizontal_m),
+    )
+    value = max(certificate.lower_bound_m, min(found.length_m, horizontal_m))
+    method = certificate.method
+    if value > certificate.lower_bound_m:
+        method = f"{method} + sorties"
+    raised = dataclasses.replace(certificate, lower_bound_m=value, method=method)
+    time_bound = max(
+        _time_bound(site, area, band, model, outer, raised, max(found.sorties, 1)),
+        found.flight_time_s,
+    )
+    # One time bound, the larger: the summary's sortie line and the band's line agree.
+    found = dataclasses.replace(found, flight_time_s=time_bound)
+    return dataclasses.replace(raised, sorties=found), time_bound
+
+
 def _time_bound(
     site: SiteInputs,
     area: PlanArea,
     band: FlightBand,
     model: FlightModel,
     outer: BandOuter,
-    horizontal_m: float,
-    settings: PlanSettings,
+    certificate: Certificate,
+    sorties: int,
 ) -> float:
     """A lower bound of the flight time of any flight in the band that photographs every
-    target, as the flight model counts it.
+    target, as the flight model counts it, given at least ``sorties`` sorties.
 
-    The take-off to the band's floor over home and the landing from it, once for each of the
-    sorties the endurance forces at least (:func:`urpt_gcs.bound.sorties.sortie_bound`); a
-    stop for each of a set of targets no single photo can hold two of (their outer discs
-    apart); and the legs, each of which takes at least its horizontal time and at least its
-    vertical time. Their horizontal lengths add up to at least the horizontal bound; their
-    climbs to at least the range of heights every such flight spans, less the take-off: it
-    must rise to see the target whose outer disc sits highest (above its ground, and the
-    floor over the disc's lowest corner) and sink to see the one whose disc sits lowest (the
-    ceiling over its highest corner), and it starts and ends at home; its descents likewise.
-    Sorties from home and back only climb and sink more than one flight through the same
-    heights.
+    The take-off to the band's floor over home and the landing from it, once for each
+    sortie; a stop for each of a set of targets no single photo can hold two of (their outer
+    discs apart); and the legs, each of which takes at least its horizontal time and at least
+    its vertical time. Their horizontal lengths add up to at least the certificate's bound;
+    their climbs to at least the range of heights every such flight spans, less the
+    take-off: it must rise to see the target whose outer disc sits highest (above its
+    ground, and the floor over the disc's lowest corner) and sink to see the one whose disc
+    sits lowest (the ceiling over its highest corner), and it starts and ends at home; its
+    descents likewise. Sorties from home and back only climb and sink more than one flight
+    through the same heights.
     """
     photos = len(greedy_disjoint(site.targets_xy, float(outer.radius_m.max())))
-    # Inside the band every leg is flown in AUTO at the mission's cruise speed: the way home
-    # too follows the terrain through waypoints (RTL would fly straight).
     speed = model.cruise_m_s
     home = area.home_ground_m
     rise_to = max(float(np.max(np.maximum(area.ground_m, outer.lowest_m + band.floor_m))), home)
     sink_to = min(float(np.min(outer.highest_m + band.ceiling_m)), home)
     vertical = max(rise_to - sink_to - band.floor_m, 0.0)
-    legs = max(horizontal_m / speed, vertical / model.climb_m_s + vertical / model.descent_m_s)
+    legs = max(
+        certificate.lower_bound_m / speed,
+        vertical / model.climb_m_s + vertical / model.descent_m_s,
+    )
     ends = model.takeoff_s(band.floor_m) + model.landing_s(band.floor_m)
-    sorties = 1
-    if settings.endurance_min is not None:
-        # Each sortie takes at least its ends, its stops and its horizontal length at the
-        # cruise speed (climbs only add to a leg): the sortie bound's budget, in the band.
-        budget = SortieBudget(
-            endurance_s=settings.endurance_min * 60.0,
-            ends_s=ends,
-            stop_s=model.stop_s,
-            per_metre_s=1.0 / speed,
-        )
-        away = np.hypot(*(site.targets_xy - np.asarray(site.home_xy)).T) - outer.radius_m
-        found = sortie_bound(
-            site.targets_xy, outer.radius_m, np.maximum(away, 0.0), horizontal_m, budget
-        )
-        sorties = max(found.sorties, 1)
     return sorties * ends + legs + max(photos, 1) * model.stop_s

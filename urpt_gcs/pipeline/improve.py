@@ -14,8 +14,9 @@ import numpy as np
 
 from urpt_gcs.bound.certificate import Certificate, certify
 from urpt_gcs.bound.geometric import geometric_lower_bound
+from urpt_gcs.bound.lower_bound import sorties_through
 from urpt_gcs.bound.lower_bound import warm_up as warm_bound
-from urpt_gcs.bound.sorties import SortieBudget, sortie_bound, star_distances
+from urpt_gcs.bound.sorties import SORTIES_SHARE, SortieBudget, sortie_bound, star_distances
 from urpt_gcs.errors import PlanError
 from urpt_gcs.flight.refinement import Refinement, refine_along, refine_tour
 from urpt_gcs.flight.sorties import SortieOrder
@@ -37,10 +38,6 @@ from urpt_gcs.visibility.outer import warm_up as warm_walks
 # whatever the clock) may take to walk; the bound itself has the rest, and never less than
 # this share, so the stage keeps to its time unless the first stars alone overrun it.
 _WALK_SHARE = 0.5
-# Share of the bound's time the K-tree bound of sorties takes at least, after the bound of
-# one flight (which keeps its whole time: the stage runs over by up to this share where two
-# sorties or more are proven).
-_SORTIES_SHARE = 0.15
 
 # How much shorter a tour read off the bound must be to replace the refined one.
 _BETTER = 1e-6
@@ -197,7 +194,7 @@ def certify_flight(
     single = certify(regions, min(flown_m, tour_m), left_s, also, ratio, tighten)
     # What is left of the stage's time, and at least its share, for the K-tree of sorties
     # (which takes it only where two sorties or more are proven).
-    sorties_s = max(time_limit_s - (time.perf_counter() - started), _SORTIES_SHARE * time_limit_s)
+    sorties_s = max(time_limit_s - (time.perf_counter() - started), SORTIES_SHARE * time_limit_s)
     if budget is None:
         endurance = math.inf if settings.endurance_min is None else settings.endurance_min * 60.0
         budget = SortieBudget.of(flight_model(settings), altitude_rel(area), endurance)
@@ -210,6 +207,7 @@ def certify_flight(
         budget,
         flown_m,
         sorties_s,
+        sorties_through(regions, flown_m),
     )
     value = float(max(single.lower_bound_m, min(sorties.length_m, flown_m)))
     method = single.method if value <= single.lower_bound_m else f"{single.method} + sorties"
