@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from support.sortie_brute import parts, sortie_time, subsets
+from support.sortie_brute import partitions_by_count, sortie_time, subsets
 
 from urpt_gcs.bound.k_tree import k_tree_bound
 from urpt_gcs.bound.sorties import SortieBudget, sortie_bound
@@ -20,17 +20,8 @@ HOME = (0.0, 0.0)
 def _shortest_plans(points: np.ndarray) -> list[float]:
     """Per count k of sorties (index k), the shortest plan of exactly k non-empty sorties
     from home through the points (each sortie the shortest through its part)."""
-    n = len(points)
     short, _, _ = subsets(points, FlightModel.arducopter(5.0, 2.0), math.inf, HOME, 30.0)
-    full = (1 << n) - 1
-    best = [np.full(1 << n, np.inf) for _ in range(n + 1)]
-    best[0][0] = 0.0
-    for k in range(1, n + 1):
-        for mask in range(1, 1 << n):
-            best[k][mask] = min(
-                (short[p] + best[k - 1][mask ^ p] for p in parts(mask)), default=math.inf
-            )
-    return [float(best[k][full]) for k in range(n + 1)]
+    return partitions_by_count(short, len(points))
 
 
 def _layout(seed: int, far: bool) -> np.ndarray:

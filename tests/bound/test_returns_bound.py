@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from support.sortie_brute import parts, subsets
+from support.sortie_brute import partitions_by_count, subsets
 
 from urpt_gcs.bound.lower_bound import returns_bound, sorties_through
 from urpt_gcs.bound.order_bound import order_bound
@@ -24,17 +24,8 @@ MODEL = FlightModel.arducopter(cruise_m_s=5.0, hold_s=2.0)
 def _plans(points: np.ndarray, endurance_s: float = math.inf) -> list[float]:
     """Per count k (index k), the shortest plan of exactly k non-empty sorties from home
     through the points, each sortie the shortest through its part within the endurance."""
-    n = len(points)
     short, _, _ = subsets(points, MODEL, endurance_s, HOME, 30.0)
-    full = (1 << n) - 1
-    best = [np.full(1 << n, np.inf) for _ in range(n + 1)]
-    best[0][0] = 0.0
-    for k in range(1, n + 1):
-        for mask in range(1, 1 << n):
-            best[k][mask] = min(
-                (short[p] + best[k - 1][mask ^ p] for p in parts(mask)), default=math.inf
-            )
-    return [float(best[k][full]) for k in range(n + 1)]
+    return partitions_by_count(short, len(points))
 
 
 def _points(seed: int, far: bool) -> np.ndarray:

@@ -12,7 +12,14 @@ import numpy as np
 
 from urpt_gcs.problem.flight_time import FlightModel
 
-__all__ = ["VARIED_MODELS", "best_partition", "parts", "sortie_time", "subsets"]
+__all__ = [
+    "VARIED_MODELS",
+    "best_partition",
+    "partitions_by_count",
+    "parts",
+    "sortie_time",
+    "subsets",
+]
 
 
 def sortie_time(
@@ -84,6 +91,20 @@ def best_partition(cost: np.ndarray, n: int) -> float:
     for mask in range(1, 1 << n):
         best[mask] = min(cost[p] + best[mask ^ p] for p in parts(mask))
     return float(best[-1])
+
+
+def partitions_by_count(cost: np.ndarray, n: int) -> list[float]:
+    """Per count k (index k), the least total cost of a partition of all ``n`` points into
+    exactly k parts (inf where there is none)."""
+    full = (1 << n) - 1
+    best = [np.full(1 << n, np.inf) for _ in range(n + 1)]
+    best[0][0] = 0.0
+    for k in range(1, n + 1):
+        for mask in range(1, 1 << n):
+            best[k][mask] = min(
+                (cost[p] + best[k - 1][mask ^ p] for p in parts(mask)), default=math.inf
+            )
+    return [float(best[k][full]) for k in range(n + 1)]
 
 
 # Flight models of different speeds, limits and firmwares, for tests of their properties.
