@@ -1,10 +1,12 @@
 """Benchmark: plan the demo site and the real rasters beside the checkout; print timings.
 
-    .venv/bin/python benchmarks/plan_sites.py [--time-limit S] [--count N]
+    .venv/bin/python benchmarks/plan_sites.py [--time-limit S] [--count N] [--camera NAME]
 
 Targets on the real rasters are placed deterministically on valid ground (same rule as the
 tests). Reports wall time per stage, visibility time per target, the tour before and after
-refinement, the certified lower bound of the shortest possible flight and the gap.
+refinement, the certified lower bound of the shortest possible flight and the gap. With
+``--camera`` (``phantom4rtk``, ``mavic3e``) every site is planned with that frame camera
+(4 headings) instead of the 30-degree cone.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from support.targets import REAL_CASES, valid_targets  # noqa: E402
 
 from urpt_gcs.pipeline.planner import plan  # noqa: E402
 from urpt_gcs.pipeline.settings import PlanSettings  # noqa: E402
+from urpt_gcs.site.camera import camera_preset  # noqa: E402
 from urpt_gcs.solvers import SolveSettings  # noqa: E402
 
 
@@ -57,8 +60,10 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--time-limit", type=float, default=5.0)
     parser.add_argument("--count", type=int, default=None, help="targets per real raster")
+    parser.add_argument("--camera", default=None, help="a frame camera by name")
     args = parser.parse_args()
-    settings = PlanSettings(solve=SolveSettings(time_limit_s=args.time_limit))
+    frame = None if args.camera is None else camera_preset(args.camera).frame
+    settings = PlanSettings(solve=SolveSettings(time_limit_s=args.time_limit), frame=frame)
     run("demo", REPO / "missions/demo/site.tif", REPO / "missions/demo/targets.kml", settings)
     with tempfile.TemporaryDirectory() as tmp:
         for name, count, box in REAL_CASES:
