@@ -798,3 +798,45 @@ def test_crowded_discs_are_bounded_by_the_tube_when_it_is_larger() -> None:
     assert tour.bound is not None
     assert tour.bound.method == f"tube over all {n}"
     assert 0.0 < tour.lower_bound <= tour.length
+
+
+def test_the_time_a_bound_leaves_goes_on_ruining_the_shortest_tour(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A bound that stops at once (as the order search does where it can rise no further)
+    leaves its time to the search: areas of the shortest tour are ruined after it, the solve
+    takes about its whole time, and the tour kept enters every disc (shapely) and is no
+    longer than the one the bound was given."""
+    import time
+
+    from urpt_gcs.solvers import continuous, disc_tour
+
+    rng = np.random.default_rng(5)
+    n = 80
+    discs = np.column_stack([rng.uniform(0, 200, (n, 2)), rng.uniform(1.0, 6.0, n)])
+    regions = RegionSet(discs=discs, depot_xy=(100.0, 100.0))
+    real_bound, real_ruin = continuous.lower_bound, disc_tour.region_ruin
+    given: list[tuple[float, float]] = []
+    ruins: list[float] = []
+
+    def quick_bound(regions, upper, time_limit_s, gap_target, method):  # type: ignore[no-untyped-def]
+        found = real_bound(regions, upper, min(time_limit_s, 0.2), gap_target, method=method)
+        given.append((upper, time.perf_counter()))
+        return found
+
+    def spy_ruin(*args):  # type: ignore[no-untyped-def]
+        ruins.append(time.perf_counter())
+        return real_ruin(*args)
+
+    monkeypatch.setattr(continuous, "lower_bound", quick_bound)
+    monkeypatch.setattr(disc_tour, "region_ruin", spy_ruin)
+    limit = 8.0
+    tour = solve_regions(regions, SolveSettings(time_limit_s=limit))
+    assert len(given) == 1
+    upper, bounded_at = given[0]
+    assert tour.lower_bound < upper  # the bound stopped short of the tour
+    assert sum(t > bounded_at for t in ruins) >= 2
+    assert tour.solve_s >= 0.85 * limit
+    assert tour.length <= upper * (1 + 1e-12)
+    ring = np.vstack([(100.0, 100.0), tour.points_xy])
+    assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()

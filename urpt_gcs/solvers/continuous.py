@@ -226,6 +226,18 @@ def solve_regions(
         length = closed_length(relaxed[1], regions.depot_xy)
         if length < best_len:
             best_len, (best_seq, best_pts) = length, relaxed
+    left = settings.time_limit_s - (time.perf_counter() - started)
+    searched = regions.n - (regions.depot_xy is None) >= disc_tour.MIN_SEARCHED
+    if with_discs and searched and left >= _RUIN_S and best_len > bound.value * (1 + gap_target):
+        # The bound stopped early (it could rise no further): its time left goes on ruining
+        # areas of the shortest tour, which the bound holds for as it holds for every tour.
+        seq, pts = _search_starts(
+            regions, best_seq, best_pts, left, settings.seed + 1, settings.threads, ruins=True
+        )
+        pts = _inside_discs(regions, seq, pts)
+        length = closed_length(pts, regions.depot_xy)
+        if length < best_len and regions.contains(pts, seq).all():
+            best_len, best_seq, best_pts = length, seq, pts
     return ContinuousTour(
         points_xy=stops(best_pts),
         touch_region=best_seq,
@@ -356,13 +368,15 @@ def _search_starts(
     seed: int,
     threads: int = 1,
     instance: Instance | None = None,
+    ruins: bool = False,
 ) -> tuple[IntArray, FloatArray]:
     """The disc tour searched (:func:`_search_discs`) for ``seconds``: from the given tour
     and from other starts in turn: discrete solves of ``instance`` (the candidates of the
     discrete problem) with fresh seeds where it is given, else insertion tours. Then from
     the shortest found with one area of it ruined at a time (:func:`_region_ruin`) or, on
     few discs around a depot, also with the depot moved (:func:`_depot_moved`). The
-    shortest found (never longer than the given tour).
+    shortest found (never longer than the given tour). With ``ruins`` the whole time goes
+    to the ruins of the given tour and those found from it: no other start.
 
     With ``threads`` above 1 as many searches run side by side (the search's kernels release
     the GIL), each taking its own starts and ruining the shortest any has found."""
@@ -370,6 +384,9 @@ def _search_starts(
     if regions.n - (regions.depot_xy is None) < disc_tour.MIN_SEARCHED:
         return _search_discs(regions, seq, pts, seconds, seed)
     shared = _Shortest(regions, (seq, pts), seconds, instance)
+    if ruins:
+        shared.ruin_at = time.perf_counter()
+        shared.offer((seq, pts))
     if threads == 1:
         _search_lane(shared, seed, 0, 1)
         return shared.best
@@ -432,6 +449,8 @@ def _search_lane(shared: _Shortest, seed: int, lane: int, lanes: int) -> None:
             break
         r = k * lanes + lane
         seconds = min(each, max(left, 0.05))
+        if left <= 0.0 and k == 0 and shared.length < math.inf:
+            break  # (ruins only: the given tour is offered already)
         if r == 0:
             start = shared.start
         elif shared.instance is not None:
