@@ -840,3 +840,54 @@ def test_the_time_a_bound_leaves_goes_on_ruining_the_shortest_tour(
     assert tour.length <= upper * (1 + 1e-12)
     ring = np.vstack([(100.0, 100.0), tour.points_xy])
     assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
+
+
+def test_nested_discs_name_a_disc_wholly_inside_that_holds_none() -> None:
+    """Checked with shapely's geometry: every disc named holds no other and lies wholly
+    inside the disc that names it; every disc that names none holds no other; equal discs
+    name none."""
+    from shapely.geometry import Point
+
+    from urpt_gcs.solvers.continuous import nested_discs
+
+    rng = np.random.default_rng(9)
+    n = 120
+    discs = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(0.5, 20.0, n)])
+    discs = np.vstack([discs, discs[:3]])  # equal discs
+    inside = nested_discs(discs)
+    shapes = [Point(x, y).buffer(r, 256) for x, y, r in discs]
+
+    def holds(i: int, j: int) -> bool:  # exact, apart from the polygons
+        d = float(np.hypot(*(discs[i, :2] - discs[j, :2])))
+        return i != j and d + discs[j, 2] < discs[i, 2] - 1e-9
+
+    assert (inside >= 0).sum() > 10
+    for i in range(len(discs)):
+        if inside[i] < 0:
+            assert not any(holds(i, j) for j in range(len(discs)))
+        else:
+            j = int(inside[i])
+            assert inside[j] == -1
+            assert shapes[i].buffer(1e-6).contains(shapes[j])
+            assert holds(i, j)
+
+
+def test_a_tour_of_discs_holding_others_enters_them_all_and_is_bounded() -> None:
+    """Large discs around small ones: the tour is searched over the discs that hold none,
+    enters every disc (shapely), lists each once, and its bound is below it."""
+    rng = np.random.default_rng(2)
+    small = np.column_stack([rng.uniform(0, 300, (40, 2)), rng.uniform(1.0, 4.0, 40)])
+    around = small[:25].copy()
+    around[:, :2] += rng.uniform(-3.0, 3.0, (25, 2))
+    around[:, 2] += rng.uniform(8.0, 30.0, 25)
+    discs = np.vstack([small, around])
+    regions = RegionSet(discs=discs, depot_xy=(150.0, 150.0))
+    tour = solve_regions(regions, SolveSettings(time_limit_s=3.0))
+    assert sorted(tour.touch_region.tolist()) == list(range(len(discs)))
+    off = np.hypot(*(tour.touch_xy - discs[tour.touch_region, :2]).T)
+    assert (off <= discs[tour.touch_region, 2]).all()
+    ring = np.vstack([(150.0, 150.0), tour.points_xy])
+    assert (_polyline_distance(ring, discs[:, :2]) <= discs[:, 2] * (1 + 1e-9)).all()
+    legs = np.vstack([ring, ring[:1]])
+    assert tour.length == pytest.approx(float(np.hypot(*np.diff(legs, axis=0).T).sum()), rel=1e-9)
+    assert 0.0 < tour.lower_bound <= tour.length

@@ -15,6 +15,7 @@ shortest tour it finds that enters every region together with a certified lower 
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import threading
@@ -23,6 +24,7 @@ from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from urpt_gcs.arrays import FloatArray, IntArray
 from urpt_gcs.bound.lower_bound import Bound, lower_bound, tube_over, with_tube
@@ -37,6 +39,7 @@ from urpt_gcs.solvers.registry import solve
 __all__ = [
     "SAMPLES",
     "ContinuousTour",
+    "nested_discs",
     "solve_regions",
     "stops",
     "touches",
@@ -165,6 +168,23 @@ def solve_regions(
         The tour, its length before and after refinement, and the bound.
     """
     settings = settings or SolveSettings()
+    if regions.discs is not None:
+        nested = nested_discs(regions.discs)
+        if (nested >= 0).any():
+            # A disc holding another is entered by every tour that enters the other: the
+            # tours through the rest are the same tours, and their bound is a bound.
+            kept = np.flatnonzero(nested < 0)
+            fewer = dataclasses.replace(
+                regions,
+                discs=regions.discs[kept],
+                outer=(),
+                depot_inside=None
+                if regions.depot_inside is None
+                else tuple(regions.depot_inside[k] for k in kept),
+            )
+            return _with_nested(
+                regions, kept, nested, solve_regions(fewer, settings, solver, samples, gap_target)
+            )
     started = time.perf_counter()
     solve_budget = settings.time_limit_s * (1.0 - _BOUND_SHARE)
     if regions.discs is not None:
@@ -250,6 +270,55 @@ def solve_regions(
         optimal_over_candidates=first.proven_optimal,
         solve_s=time.perf_counter() - started,
     )
+
+
+def nested_discs(discs: FloatArray) -> IntArray:
+    """Per disc, a disc wholly inside it that holds no other (its index), or -1 where the
+    disc holds none. Held means strictly, by a relative hair: a point of the inner disc lies
+    inside the outer one whatever the rounding, and equal discs are kept both."""
+    d = np.asarray(discs, dtype=np.float64)
+    n = len(d)
+    xy, r = d[:, :2], d[:, 2]
+    slack = 1e-12 * (1.0 + float(np.abs(xy).max(initial=0.0)) + float(r.max(initial=0.0)))
+    tree = cKDTree(xy)
+    holds: list[IntArray] = []
+    for i, near in enumerate(tree.query_ball_point(xy, r)):
+        j = np.asarray(near, dtype=np.int64)
+        j = j[j != i]
+        inner = np.hypot(*(xy[j] - xy[i]).T) + r[j] <= r[i] - slack
+        holds.append(j[inner])
+    # Strictly held discs are smaller: the smallest first, each one that holds a disc takes
+    # the innermost that disc leads to, which holds none.
+    out = np.full(n, -1, dtype=np.int64)
+    for i in np.argsort(r, kind="stable"):
+        if holds[i].size:
+            held = int(holds[i][0])
+            out[i] = held if out[held] < 0 else out[held]
+    return out
+
+
+def _with_nested(
+    regions: RegionSet, kept: IntArray, inside: IntArray, tour: ContinuousTour
+) -> ContinuousTour:
+    """The tour of the discs ``kept`` as a tour of them all: each disc that holds another
+    touched where the disc it holds is (:func:`nested_discs`), and the whole checked."""
+    seq = kept[tour.touch_region]
+    at = {int(k): i for i, k in enumerate(seq.tolist())}
+    after: dict[int, list[int]] = {}
+    for i in np.flatnonzero(inside >= 0).tolist():
+        after.setdefault(at[int(inside[i])], []).append(i)
+    order: list[int] = []
+    for i in range(len(seq)):
+        order.append(i)
+        order.extend(-1 - k for k in after.get(i, []))
+    full_seq = np.asarray([seq[i] if i >= 0 else -1 - i for i in order], dtype=np.int64)
+    full_xy = np.asarray(
+        [tour.touch_xy[i] if i >= 0 else tour.touch_xy[at[int(inside[-1 - i])]] for i in order],
+        dtype=np.float64,
+    ).reshape(-1, 2)
+    if not regions.contains(full_xy, full_seq).all() or np.unique(full_seq).size != regions.n:
+        raise PlanError("internal check failed: a disc holding another was left; report this")
+    return dataclasses.replace(tour, touch_region=full_seq, touch_xy=full_xy)
 
 
 def _inside_discs(regions: RegionSet, seq: IntArray, pts: FloatArray) -> FloatArray:
