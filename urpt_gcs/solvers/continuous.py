@@ -304,18 +304,14 @@ def _with_nested(
     touched where the disc it holds is (:func:`nested_discs`), and the whole checked."""
     seq = kept[tour.touch_region]
     at = {int(k): i for i, k in enumerate(seq.tolist())}
-    after: dict[int, list[int]] = {}
+    holders: dict[int, list[int]] = {}
     for i in np.flatnonzero(inside >= 0).tolist():
-        after.setdefault(at[int(inside[i])], []).append(i)
-    order: list[int] = []
-    for i in range(len(seq)):
-        order.append(i)
-        order.extend(-1 - k for k in after.get(i, []))
-    full_seq = np.asarray([seq[i] if i >= 0 else -1 - i for i in order], dtype=np.int64)
-    full_xy = np.asarray(
-        [tour.touch_xy[i] if i >= 0 else tour.touch_xy[at[int(inside[-1 - i])]] for i in order],
-        dtype=np.float64,
-    ).reshape(-1, 2)
+        holders.setdefault(at[int(inside[i])], []).append(i)
+    # Each touch, then the discs holding its disc, at the same point.
+    places = [(int(k), i) for i, k in enumerate(seq.tolist())]
+    order = [p for k, i in places for p in [(k, i), *((h, i) for h in holders.get(i, []))]]
+    full_seq = np.asarray([k for k, _ in order], dtype=np.int64)
+    full_xy = tour.touch_xy[np.asarray([i for _, i in order], dtype=np.int64)].reshape(-1, 2)
     if not regions.contains(full_xy, full_seq).all() or np.unique(full_seq).size != regions.n:
         raise PlanError("internal check failed: a disc holding another was left; report this")
     return dataclasses.replace(tour, touch_region=full_seq, touch_xy=full_xy)
